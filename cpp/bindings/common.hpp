@@ -1,0 +1,94 @@
+// Shared helpers of the binding layer: dtype dispatch, shape and finiteness checks that raise
+// ValueError naming the argument and the problem. The core never sees Python; only this layer
+// turns cdam::Status into exceptions.
+#pragma once
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+
+#include <cmath>
+#include <string>
+
+#include "cdam/activation.hpp"
+#include "cdam/status.hpp"
+
+namespace cdam::bind {
+
+namespace py = pybind11;
+
+[[noreturn]] inline void value_error(const std::string& msg) { throw py::value_error(msg); }
+
+inline void check_status(Status s, const std::string& what) {
+  if (s != Status::Ok) value_error(what + ": " + to_string(s));
+}
+
+enum class Dtype { F32, F64 };
+
+// float32 or float64, else ValueError naming the argument.
+inline Dtype float_dtype(const py::array& a, const char* name) {
+  if (a.dtype().is(py::dtype::of<double>())) return Dtype::F64;
+  if (a.dtype().is(py::dtype::of<float>())) return Dtype::F32;
+  value_error(std::string(name) + ": dtype " + std::string(py::str(a.dtype())) +
+              " is not supported; pass float32 or float64");
+}
+
+// A C-contiguous array of T (copying from Fortran order or strided views when needed).
+template <typename T>
+py::array_t<T, py::array::c_style> c_array(const py::array& a) {
+  return py::array_t<T, py::array::c_style | py::array::forcecast>::ensure(a);
+}
+
+template <typename T>
+void check_finite(const py::array_t<T, py::array::c_style>& a, const char* name) {
+  const T* p = a.data();
+  for (py::ssize_t k = 0, n = a.size(); k < n; ++k)
+    if (!std::isfinite(p[k])) value_error(std::string(name) + ": contains NaN or Inf");
+}
+
+// A checked 2-D (samples x channels) array; cols < 0 means any number of columns.
+template <typename T>
+py::array_t<T, py::array::c_style> matrix(const py::array& a, const char* name, py::ssize_t cols = -1,
+                                          py::ssize_t rows = -1) {
+  if (a.ndim() != 2)
+    value_error(std::string(name) + ": expected a 2-D array (samples x channels), got " +
+                std::to_string(a.ndim()) + "-D");
+  auto c = c_array<T>(a);
+  if (c.shape(0) == 0 || c.shape(1) == 0) value_error(std::string(name) + ": empty array");
+  if (cols >= 0 && c.shape(1) != cols)
+    value_error(std::string(name) + ": expected " + std::to_string(cols) + " columns, got " +
+                std::to_string(c.shape(1)));
+  if (rows >= 0 && c.shape(0) != rows)
+    value_error(std::string(name) + ": expected " + std::to_string(rows) + " rows (samples), got " +
+                std::to_string(c.shape(0)));
+  check_finite(c, name);
+  return c;
+}
+
+template <typename T>
+py::array_t<T, py::array::c_style> vector(const py::array& a, const char* name, py::ssize_t len = -1) {
+  if (a.ndim() != 1) value_error(std::string(name) + ": expected a 1-D array");
+  auto c = c_array<T>(a);
+  if (c.shape(0) == 0) value_error(std::string(name) + ": empty array");
+  if (len >= 0 && c.shape(0) != len)
+    value_error(std::string(name) + ": expected length " + std::to_string(len) + ", got " +
+                std::to_string(c.shape(0)));
+  check_finite(c, name);
+  return c;
+}
+
+inline Activation activation_from(const std::string& s) {
+  if (s == "tansig" || s == "tanh") return Activation::Tansig;
+  if (s == "logsig" || s == "sigmoid") return Activation::Logsig;
+  value_error("activation: unknown '" + s + "'; use 'tansig' or 'logsig'");
+}
+
+inline void check_positive(long v, const char* name) {
+  if (v < 1) value_error(std::string(name) + ": must be at least 1, got " + std::to_string(v));
+}
+
+// Runs f.template operator()<T>() for the array's float dtype.
+template <typename F>
+auto dispatch(const py::array& a, const char* name, F&& f) {
+  return float_dtype(a, name) == Dtype::F64 ? f(double{}) : f(float{});
+}
+
+}  // namespace cdam::bind

@@ -1,0 +1,20 @@
+// The private extension cdam_core._core: a thin root; each domain registers its own functions.
+#include <pybind11/pybind11.h>
+
+namespace py = pybind11;
+
+void register_preprocess(py::module_& m);
+void register_network(py::module_& m);
+void register_narx(py::module_& m);
+void register_rng(py::module_& m);
+
+PYBIND11_MODULE(_core, m) {
+  m.doc() = "cdam_core._core: the C++/Eigen core (private; use the cdam_core package)";
+#ifdef CDAM_VERSION
+  m.attr("__version__") = CDAM_VERSION;
+#endif
+  register_preprocess(m);
+  register_network(m);
+  register_narx(m);
+  register_rng(m);
+}

@@ -1,0 +1,44 @@
+"""cdam_core: identify, check and fly the dynamics of a cable-driven aerial manipulator.
+
+Public names are loaded lazily (PEP 562) so that ``import cdam_core`` and the CLI start fast and
+pure-Python parts work without pulling in plotting or the compiled core.
+"""
+from __future__ import annotations
+
+import importlib
+import os
+
+__version__ = "0.1.0"
+
+# Developers building with plain CMake point this at their build's cdam_core folder (DESIGN.md).
+_ext_dir = os.environ.get("CDAM_CORE_EXT_DIR")
+if _ext_dir:
+    __path__.insert(0, _ext_dir)  # type: ignore[name-defined]
+
+# public name -> submodule that defines it
+_LAZY = {
+    "five_point_cubic_smooth": "preprocess",
+    "MinMaxScaler": "preprocess",
+    "BPNetwork": "network",
+    "hidden_node_candidates": "network",
+    "Rng": "rng",
+    "load_model": "model_io",
+    "save_model": "model_io",
+    "read_dataset": "dataset",
+    "write_dataset": "dataset",
+}
+
+__all__ = sorted(_LAZY) + ["__version__"]
+
+
+def __getattr__(name: str):
+    mod = _LAZY.get(name)
+    if mod is None:
+        raise AttributeError(f"module 'cdam_core' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"cdam_core.{mod}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return __all__
