@@ -1,0 +1,14 @@
+#!/usr/bin/env bash
+# The test command: set-up, the C++ unit tests (ctest), then every pytest test once (including
+# those marked slow, so CI runs the long soak tests exactly once).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash scripts/setup.sh
+echo "== C++ unit tests (ctest)"
+.venv/bin/cmake -S . -B build/ctest -G Ninja -DCDAM_PYTHON=OFF -DCDAM_TESTS=ON > build/ctest.log 2>&1 \
+  || { cat build/ctest.log; exit 1; }
+.venv/bin/cmake --build build/ctest -j2 >> build/ctest.log 2>&1 || { cat build/ctest.log; exit 1; }
+(cd build/ctest && ../../.venv/bin/ctest --output-on-failure)
+echo "== Python tests (pytest)"
+# run from tests/ so that the installed cdam_core (not the source tree) is imported
+.venv/bin/python -m pytest -m "slow or not slow" -q -p no:cacheprovider "$@" tests
