@@ -25,9 +25,10 @@ py::array smooth(const py::array& y, int passes) {
     py::array_t<T> out(std::vector<py::ssize_t>(in.shape(), in.shape() + in.ndim()));
     std::copy(in.data(), in.data() + in.size(), out.mutable_data());
     Status s;
+    std::vector<T> work(3 * c);
     {
       py::gil_scoped_release nogil;
-      s = five_point_cubic_smooth_rows(out.mutable_data(), n, c, passes);
+      s = five_point_cubic_smooth_rows(out.mutable_data(), n, c, passes, work.data());
     }
     check_status(s, "y");
     return out;

@@ -176,3 +176,16 @@ TEST_CASE("fixed-size forward, Jacobian, smoothing and NARX allocate nothing") {
   CHECK(s2 == Status::Ok);
   CHECK(std::isfinite(y[0]));
 }
+
+TEST_CASE("multi-channel smoothing equals per-channel smoothing, heap-free") {
+  constexpr int n = 23, C = 3;
+  std::array<double, n * C> rows{}, cols{};
+  for (int k = 0; k < n * C; ++k) rows[k] = cols[k] = std::sin(0.37 * k) * (k % 7);
+  std::array<double, 3 * C> work{};
+  Eigen::internal::set_is_malloc_allowed(false);
+  const Status s = five_point_cubic_smooth_rows(rows.data(), n, C, 4, work.data());
+  Eigen::internal::set_is_malloc_allowed(true);
+  REQUIRE(s == Status::Ok);
+  for (int c = 0; c < C; ++c) REQUIRE(five_point_cubic_smooth_inplace(cols.data() + c, n, C, 4) == Status::Ok);
+  for (int k = 0; k < n * C; ++k) CHECK(rows[k] == cols[k]);
+}

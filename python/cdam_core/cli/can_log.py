@@ -44,26 +44,28 @@ def run(args) -> int:
 
     def on_term(signum, frame):
         stop["flag"] = True
-    old = signal.signal(signal.SIGTERM, on_term)
     try:
         bus = open_bus(args.interface, args.channel, port=args.port)
     except Exception as exc:  # python-can raises its own errors for unavailable interfaces
         raise CliError(f"cannot open {args.interface} bus: {exc}") from None
+    old = signal.signal(signal.SIGTERM, on_term)
     try:
-        stats = log_bus(bus, out, duration=args.duration, listeners=[recorder],
+        stats = log_bus(bus, out, duration=args.duration,
+                        listeners=[recorder.on_message_received] if args.decoded else [],
                         flush_interval=args.flush_interval, should_stop=lambda: stop["flag"],
                         on_start=None if args.quiet else
                         lambda: print(f"cdam can-log: recording to {out}", file=sys.stderr,
                                       flush=True))
     except KeyboardInterrupt:
-        stats = {"frames": recorder.counts.total(), "seconds": float("nan")}
+        stats = {"frames": -1, "seconds": float("nan")}
     finally:
         bus.shutdown()
         signal.signal(signal.SIGTERM, old)
     if not args.quiet:
         print(f"{stats['frames']} frames in {stats['seconds']:.2f} s -> {out}")
-        print(f"frames by kind: {dict(recorder.counts)}; malformed: {recorder.malformed}")
     if args.decoded:
+        if not args.quiet:
+            print(f"frames by kind: {dict(recorder.counts)}; malformed: {recorder.malformed}")
         write_dataset(Path(args.decoded), recorder.to_dataset(rate=args.rate))
         if not args.quiet:
             print(f"decoded joints -> {args.decoded}")
