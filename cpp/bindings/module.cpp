@@ -7,6 +7,8 @@ void register_preprocess(py::module_& m);
 void register_network(py::module_& m);
 void register_narx(py::module_& m);
 void register_rng(py::module_& m);
+void register_sim(py::module_& m);
+void register_optim(py::module_& m);
 
 PYBIND11_MODULE(_core, m) {
   m.doc() = "cdam_core._core: the C++/Eigen core (private; use the cdam_core package)";
@@ -17,4 +19,6 @@ PYBIND11_MODULE(_core, m) {
   register_network(m);
   register_narx(m);
   register_rng(m);
+  register_sim(m);
+  register_optim(m);
 }

@@ -21,7 +21,10 @@ constexpr int mlp_params(int i, int h, int m) {
              : i * h + h + h * m + m;
 }
 
-template <typename Scalar_, int I = Eigen::Dynamic, int H = Eigen::Dynamic, int O = Eigen::Dynamic>
+// ActFn: the activation policy (static Scalar apply(Activation, Scalar)); ExactActivation uses
+// std::tanh / std::exp, the target may pass cdam::FastActivation (fast_math.hpp).
+template <typename Scalar_, int I = Eigen::Dynamic, int H = Eigen::Dynamic, int O = Eigen::Dynamic,
+          typename ActFn = ExactActivation>
 class Mlp {
  public:
   using Scalar = Scalar_;
@@ -58,7 +61,7 @@ class Mlp {
     Eigen::Map<Eigen::Matrix<Scalar, O, 1>> yv(y, m_);
     av.noalias() = W1(theta).lazyProduct(xv);
     av += b1(theta);
-    for (Index j = 0; j < h_; ++j) av[j] = activate(act_, av[j]);
+    for (Index j = 0; j < h_; ++j) av[j] = ActFn::apply(act_, av[j]);
     yv.noalias() = W2(theta).lazyProduct(av);
     yv += b2(theta);
   }
@@ -70,7 +73,7 @@ class Mlp {
     Eigen::Map<Eigen::Matrix<Scalar, H, 1>> av(a, h_);
     av.noalias() = W1(theta).lazyProduct(xv);
     av += b1(theta);
-    for (Index j = 0; j < h_; ++j) av[j] = activate(act_, av[j]);
+    for (Index j = 0; j < h_; ++j) av[j] = ActFn::apply(act_, av[j]);
     const W2Map w2 = W2(theta);
     Eigen::Map<Eigen::Matrix<Scalar, O, Eigen::Dynamic>> Jm(J, m_, num_params());
     // hidden block: dy_k / d[W1 b1](j, l) = W2(k, j) f'(a_j) z_l, z = [x; 1], index l h + j

@@ -1,0 +1,195 @@
+// C++ tests of the optimisers (BOA, IBOA, CABC), k-means, the logistic map and the BP fitness.
+// Expected values come from closed forms (sphere minimum, separated clusters), from an
+// independent per-sample evaluation (MlpFitness against the blocked threaded BpFitness), and
+// from properties (monotone best curve, same seed same run, no heap in the iterations).
+#include <doctest/doctest.h>
+
+#include <Eigen/Core>
+#include <cmath>
+#include <vector>
+
+#include "cdam/optim/boa.hpp"
+#include "cdam/optim/bp_fitness.hpp"
+#include "cdam/optim/cabc.hpp"
+#include "cdam/optim/chaos.hpp"
+#include "cdam/optim/iboa.hpp"
+#include "cdam/optim/kmeans.hpp"
+
+using namespace cdam;
+using namespace cdam::optim;
+
+namespace {
+double sphere(const double* x, Index n) {
+  double s = 0;
+  for (Index d = 0; d < n; ++d) s += (x[d] - 0.3) * (x[d] - 0.3);
+  return s;
+}
+template <typename Vec>
+bool non_increasing(const Vec& v) {
+  for (size_t k = 1; k < v.size(); ++k)
+    if (v[k] > v[k - 1]) return false;
+  return true;
+}
+}  // namespace
+
+TEST_CASE("logistic map stays in (0, 1) and avoids its fixed points") {
+  LogisticMap<double> m;
+  Rng rng(3);
+  m.seed(rng);
+  CHECK(m.z >= 0.05);
+  CHECK(m.z < 0.95);
+  const double z0 = m.z;
+  CHECK(m.next() == doctest::Approx(4 * z0 * (1 - z0)).epsilon(1e-15));
+  for (int k = 0; k < 10000; ++k) {
+    const double z = m.next();
+    REQUIRE(z > 0.0);
+    REQUIRE(z < 1.0);
+  }
+  CHECK(LogisticMap<double>::guard(0.75) == doctest::Approx(0.123456789));
+  CHECK(LogisticMap<double>::guard(0.0) == doctest::Approx(0.123456789));
+  LogisticMap<float> f;
+  f.z = 0.5f;  // 0.5 -> 1 -> 0 without the guard
+  for (int k = 0; k < 100; ++k) REQUIRE(f.next() > 0.0f);
+}
+
+TEST_CASE("k-means separates two distant blobs") {
+  Eigen::MatrixXd x(2, 10), centres(2, 10);
+  Eigen::VectorXi label(10), count(10), perm(10);
+  for (int i = 0; i < 10; ++i) {
+    const double off = i % 2 ? 10.0 : -10.0;
+    x(0, i) = off + 0.01 * i;
+    x(1, i) = -off + 0.02 * i;
+  }
+  for (std::uint32_t seed = 0; seed < 20; ++seed) {
+    Rng rng(seed);
+    kmeans(x, 2, 10, rng, centres, label, count, perm);
+    for (int i = 2; i < 10; ++i) CHECK(label[i] == label[i % 2]);
+    CHECK(label[0] != label[1]);
+    // centre of the even points: mean computed here independently
+    double mx = 0;
+    for (int i = 0; i < 10; i += 2) mx += x(0, i);
+    CHECK(centres(0, label[0]) == doctest::Approx(mx / 5).epsilon(1e-12));
+  }
+}
+
+TEST_CASE("BOA, IBOA and CABC reduce a shifted sphere; curves never rise; seeds repeat") {
+  const Index D = 6;
+  auto f = serial_fitness<double>([](const double* x) { return sphere(x, 6); }, D);
+  BoaOptions bo;
+  bo.iterations = 60;
+  for (BoaForm form : {BoaForm::Author, BoaForm::Paper}) {
+    bo.form = form;
+    Swarm<double> s(D, 20);
+    Rng rng(11);
+    std::vector<double> curve(61);
+    REQUIRE(Boa<double>(bo).run(s, f, rng, curve.data()) == Status::Ok);
+    CHECK(non_increasing(curve));
+    CHECK(curve.back() < curve.front());
+    CHECK(s.best_fit == doctest::Approx(sphere(s.best.data(), D)).epsilon(1e-15));
+  }
+  IboaOptions io;
+  io.boa.iterations = 60;
+  Swarm<double> s1(D, 20), s2(D, 20);
+  Rng r1(5), r2(5);
+  std::vector<double> c1(61), c2(61);
+  REQUIRE(Iboa<double>(io).run(s1, f, r1, c1.data()) == Status::Ok);
+  REQUIRE(Iboa<double>(io).run(s2, f, r2, c2.data()) == Status::Ok);
+  CHECK(c1 == c2);
+  CHECK(non_increasing(c1));
+  CHECK(c1.back() < 1e-2 * c1.front());
+  CHECK(s1.best_fit == doctest::Approx(sphere(s1.best.data(), D)).epsilon(1e-15));
+  CabcOptions co;
+  co.iterations = 200;
+  co.limit = 10;
+  Swarm<double> s3(D, 20);
+  Rng r3(9);
+  std::vector<double> c3(201);
+  REQUIRE(Cabc<double>(co).run(s3, f, r3, c3.data()) == Status::Ok);
+  CHECK(non_increasing(c3));
+  CHECK(c3.back() < 1e-1 * c3.front());
+  CHECK(s3.evaluations >= 10 + 200 * 20);
+}
+
+TEST_CASE("optimiser options are checked") {
+  auto f = serial_fitness<double>([](const double* x) { return x[0]; }, 1);
+  Swarm<double> s(1, 1);
+  Rng rng(0);
+  CHECK(Boa<double>().run(s, f, rng, nullptr) == Status::InvalidArgument);  // n < 2
+  IboaOptions io;
+  io.clusters = 5;
+  Swarm<double> s4(1, 4);
+  CHECK(Iboa<double>(io).run(s4, f, rng, nullptr) == Status::InvalidArgument);
+  CabcOptions co;
+  co.lb = 1;
+  co.ub = -1;
+  CHECK(Cabc<double>(co).run(s4, f, rng, nullptr) == Status::InvalidArgument);
+}
+
+TEST_CASE("BpFitness: independent of the thread count and equal to per-sample forward") {
+  const Index i = 3, h = 5, m = 2, N = 3000;
+  Mlp<double> net(i, h, m);
+  Rng rng(1);
+  Eigen::MatrixXd X(i, N), T(m, N), thetas(net.num_params(), 7);
+  for (Index k = 0; k < X.size(); ++k) X.data()[k] = rng.uniform(-1.0, 1.0);
+  for (Index k = 0; k < T.size(); ++k) T.data()[k] = rng.uniform(-1.0, 1.0);
+  for (Index k = 0; k < thetas.size(); ++k) thetas.data()[k] = rng.uniform(-1.0, 1.0);
+  NormalEquations<double>::ConstMap Xm(X.data(), i, N), Tm(T.data(), m, N);
+  BpFitness<double> f1(net, Xm, Tm, 1), f2(net, Xm, Tm, 2), f3(net, Xm, Tm, 3);
+  double o1[7], o2[7], o3[7];
+  f1.batch(thetas.data(), 7, o1);
+  f2.batch(thetas.data(), 7, o2);
+  f3.batch(thetas.data(), 7, o3);
+  MlpFitness<Mlp<double>> ref(net, X.data(), T.data(), N);
+  for (int k = 0; k < 7; ++k) {
+    CHECK(o1[k] == o2[k]);  // bit-identical
+    CHECK(o1[k] == o3[k]);
+    CHECK(f2(thetas.col(k).data()) == o1[k]);
+    CHECK(o1[k] == doctest::Approx(ref(thetas.col(k).data())).epsilon(1e-12));
+  }
+}
+
+TEST_CASE("target build: fixed-size IBOA-BP (4-8-2, 20 butterflies) allocates nothing") {
+  using Net = Mlp<float, 4, 8, 2>;
+  constexpr int D = Net::kParams, N = 20, S = 200;
+  static float X[4 * S], T[2 * S];
+  Rng data(2);
+  for (int k = 0; k < S; ++k) {
+    for (int c = 0; c < 4; ++c) X[k * 4 + c] = data.uniform(-1.0f, 1.0f);
+    T[k * 2] = 0.5f * X[k * 4] - 0.3f * X[k * 4 + 1] * X[k * 4 + 2];
+    T[k * 2 + 1] = std::tanh(X[k * 4 + 3]);
+  }
+  Net net;
+  MlpFitness<Net> fit(net, X, T, S);
+  static Swarm<float, D, N> swarm;
+  IboaOptions io;
+  io.boa.iterations = 10;
+  Iboa<float, D, N> iboa(io);
+  Rng rng(4);
+  double curve[11];
+  Eigen::internal::set_is_malloc_allowed(false);
+  const Status st = iboa.run(swarm, fit, rng, curve);
+  CabcOptions co;
+  co.iterations = 10;
+  static Swarm<float, D, N> swarm2;
+  const Status st2 = Cabc<float, D, N>(co).run(swarm2, fit, rng, curve);
+  Eigen::internal::set_is_malloc_allowed(true);
+  REQUIRE(st == Status::Ok);
+  REQUIRE(st2 == Status::Ok);
+  CHECK(curve[10] <= curve[0]);
+}
+
+TEST_CASE("fixed and dynamic sizes give the same IBOA run in double") {
+  constexpr int D = 5, N = 8;
+  auto f = serial_fitness<double>([](const double* x) { return sphere(x, 5); }, D);
+  IboaOptions io;
+  io.boa.iterations = 20;
+  io.clusters = 2;
+  io.chaos_candidates = 3;
+  Swarm<double, D, N> sf;
+  Swarm<double> sd(D, N);
+  Rng a(17), b(17);
+  double cf[21], cd[21];
+  REQUIRE(Iboa<double, D, N>(io).run(sf, f, a, cf) == Status::Ok);
+  REQUIRE(Iboa<double>(io).run(sd, f, b, cd) == Status::Ok);
+  for (int t = 0; t <= 20; ++t) CHECK(cf[t] == doctest::Approx(cd[t]).epsilon(1e-14));
+}

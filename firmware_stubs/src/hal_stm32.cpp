@@ -1,0 +1,70 @@
+// STM32F405 board layer (RM0090 register map). QEMU's netduinoplus2 implements SysTick and the
+// USART (stm32f2xx_usart); RCC and GPIO writes are harmless there and needed on a real board.
+#include "fw/hal.hpp"
+
+namespace fw::hal {
+namespace {
+
+inline volatile std::uint32_t& reg(std::uint32_t addr) {
+  return *reinterpret_cast<volatile std::uint32_t*>(addr);
+}
+
+constexpr std::uint32_t kSysTickCsr = 0xE000E010u, kSysTickRvr = 0xE000E014u,
+                        kSysTickCvr = 0xE000E018u;
+constexpr std::uint32_t kRccAhb1Enr = 0x40023830u, kRccApb2Enr = 0x40023844u;
+constexpr std::uint32_t kGpioA = 0x40020000u;  // MODER +0x00, AFRH +0x24
+constexpr std::uint32_t kUsart1 = 0x40011000u;  // SR +0x00, DR +0x04, BRR +0x08, CR1 +0x0C
+constexpr std::uint32_t kSrRxne = 1u << 5, kSrTxe = 1u << 7;
+constexpr std::uint32_t kCr1Ue = 1u << 13, kCr1Te = 1u << 3, kCr1Re = 1u << 2;
+constexpr std::uint32_t kApb2Hz = 84000000u;  // PCLK2 at 168 MHz SYSCLK
+
+volatile std::uint32_t g_millis = 0;
+
+}  // namespace
+
+void systick_free_running() {
+  reg(kSysTickCsr) = 0;
+  reg(kSysTickRvr) = 0x00FFFFFFu;
+  reg(kSysTickCvr) = 0;
+  reg(kSysTickCsr) = 0x5u;  // enable, core clock, no interrupt
+}
+
+void systick_periodic(std::uint32_t ticks) {
+  reg(kSysTickCsr) = 0;
+  reg(kSysTickRvr) = ticks - 1u;
+  reg(kSysTickCvr) = 0;
+  reg(kSysTickCsr) = 0x7u;  // enable, interrupt, core clock
+}
+
+std::uint32_t systick_value() { return reg(kSysTickCvr) & 0x00FFFFFFu; }
+std::uint32_t millis() { return g_millis; }
+
+void usart1_init(std::uint32_t baud) {
+  reg(kRccAhb1Enr) |= 1u << 0;  // GPIOA clock
+  reg(kRccApb2Enr) |= 1u << 4;  // USART1 clock
+  // PA9, PA10: alternate function 7
+  reg(kGpioA + 0x00) = (reg(kGpioA + 0x00) & ~(0xFu << 18)) | (0xAu << 18);
+  reg(kGpioA + 0x24) = (reg(kGpioA + 0x24) & ~(0xFFu << 4)) | (0x77u << 4);
+  reg(kUsart1 + 0x08) = (kApb2Hz + baud / 2) / baud;
+  reg(kUsart1 + 0x0C) = kCr1Ue | kCr1Te | kCr1Re;
+}
+
+bool usart1_getc(char* c) {
+  if (!(reg(kUsart1 + 0x00) & kSrRxne)) return false;
+  *c = static_cast<char>(reg(kUsart1 + 0x04) & 0xFFu);
+  return true;
+}
+
+void usart1_putc(char c) {
+  while (!(reg(kUsart1 + 0x00) & kSrTxe)) {
+  }
+  reg(kUsart1 + 0x04) = static_cast<std::uint8_t>(c);
+}
+
+void usart1_write(const char* s, unsigned n) {
+  for (unsigned k = 0; k < n; ++k) usart1_putc(s[k]);
+}
+
+}  // namespace fw::hal
+
+extern "C" void SysTick_Handler() { fw::hal::g_millis = fw::hal::g_millis + 1; }

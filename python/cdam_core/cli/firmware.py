@@ -1,0 +1,44 @@
+"""`cdam firmware check MODEL [--json OUT]`: build the STM32F405 firmware for a model and check
+it under QEMU (equivalence with the Python model, instructions per inference, sizes, no heap)."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from cdam_core.cli.main import CliError
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("firmware", help="build and check the STM32 firmware under QEMU")
+    sub = p.add_subparsers(dest="firmware_command", metavar="ACTION")
+    c = sub.add_parser("check", help="build for MODEL, run the equivalence and cost checks",
+                       description="Cross-builds firmware_stubs/ for MODEL (arm-none-eabi-gcc), "
+                                   "runs 1,000 input vectors on qemu-system-arm -M netduinoplus2 "
+                                   "and prints text/data/bss, heap_free, "
+                                   "instructions_per_inference and max_abs_error.")
+    c.add_argument("model", metavar="MODEL", help="model file (.json)")
+    c.add_argument("--json", dest="json_out", default=None, help="also write the report here")
+    c.add_argument("--build-dir", default=None, help="keep the build here (default: temporary)")
+    c.add_argument("--timeout", type=float, default=60.0, help="seconds per QEMU run")
+    c.set_defaults(func=run_check)
+    p.set_defaults(func=lambda args: (p.print_help(), 2)[1])
+
+
+def run_check(args) -> int:
+    from cdam_core.firmware import check, toolchain_available
+
+    why = toolchain_available()
+    if why:
+        raise CliError(f"{why}; install gcc-arm-none-eabi, libnewlib-arm-none-eabi, "
+                       "libstdc++-arm-none-eabi-newlib and qemu-system-arm")
+    if args.json_out and not Path(args.json_out).resolve().parent.is_dir():
+        raise CliError(f"--json: folder of {args.json_out!r} does not exist")
+    try:
+        report = check(args.model, build_dir=args.build_dir, timeout=args.timeout)
+    except RuntimeError as exc:
+        raise CliError(str(exc)) from None
+    text = json.dumps(report, indent=1)
+    print(text)
+    if args.json_out:
+        Path(args.json_out).write_text(text + "\n")
+    return 0

@@ -1,0 +1,132 @@
+"""`cdam identify`: IBOA-BP, BOA-BP, CABC-BP and plain BP on a dataset CSV, with report and JSON."""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+from cdam_core.cli.main import CliError
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "identify", help="identify a BP/NARX model with IBOA, BOA, CABC or plain BP",
+        description="Train on TRAIN.csv (dataset format), evaluate on a test record (--test, or "
+                    "the last part of TRAIN with --split) and an optional validation record; "
+                    "compare algorithms over several seeds with a rank-sum test.")
+    p.add_argument("train", help="training record (dataset CSV)")
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--test", help="test record (dataset CSV)")
+    g.add_argument("--split", type=float, default=None,
+                   help="fraction of TRAIN used for training; the rest is the test record")
+    p.add_argument("--validate", help="validation record (dataset CSV)")
+    p.add_argument("--algo", default="all", choices=["iboa", "boa", "cabc", "bp", "all"])
+    p.add_argument("--seeds", type=int, default=10, help="seeds per algorithm (default 10)")
+    p.add_argument("--hidden", type=int, default=20)
+    p.add_argument("--narx", default=None, help="NARX orders na,nb,nk (default: static map)")
+    p.add_argument("--inputs", default=None, help="comma-separated input columns")
+    p.add_argument("--outputs", default=None, help="comma-separated output columns")
+    p.add_argument("--smoothing", type=int, default=5, help="five-point smoothing passes")
+    p.add_argument("--iterations", type=int, default=50, help="Tmax of the optimisers")
+    p.add_argument("--population", type=int, default=20, help="g (butterflies) and CABC Np")
+    p.add_argument("--epochs", type=int, default=50, help="LM epochs at most")
+    p.add_argument("--goal", type=float, default=0.003, help="LM goal (training MSE)")
+    p.add_argument("--report", default=None, help="folder for report.md and PNG figures")
+    p.add_argument("--json", default=None, help="write the results as JSON")
+    p.add_argument("--save", default=None,
+                   help="save the model (best seed of the first algorithm) for cdam_core.load_model")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+
+
+def _narx(text):
+    if text is None:
+        return None
+    try:
+        v = tuple(int(x) for x in text.split(","))
+    except ValueError:
+        raise CliError(f"--narx: expected na,nb,nk integers, got {text!r}") from None
+    if len(v) != 3 or min(v) < 0 or v[0] + v[1] < 1:
+        raise CliError(f"--narx: expected na,nb,nk >= 0 with na + nb >= 1, got {text!r}")
+    return v
+
+
+def _finite(obj):
+    """JSON-safe copy: NaN/Inf become null."""
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite(v) for v in obj]
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
+
+
+def run(args) -> int:
+    import sys
+
+    from cdam_core.dataset import read_dataset
+    from cdam_core.identify import IdentifyConfig, compare
+
+    if args.seeds < 1:
+        raise CliError("--seeds: must be >= 1")
+    if args.split is not None and not 0 < args.split < 1:
+        raise CliError(f"--split: must be in (0, 1), got {args.split}")
+    train = read_dataset(args.train, inputs=args.inputs, outputs=args.outputs)
+    if not train.inputs or not train.outputs:
+        raise CliError(f"{args.train}: no input or output columns selected (use --inputs/--outputs)")
+    U, Y, t = train.select(train.inputs), train.select(train.outputs), train.t
+    records, times = {}, {}
+    if args.test:
+        te = read_dataset(args.test, inputs=train.inputs, outputs=train.outputs)
+        records["test"] = (te.select(train.inputs), te.select(train.outputs))
+        times["test"] = te.t
+    else:
+        frac = 0.5 if args.split is None else args.split
+        n = int(round(len(t) * frac))
+        if n < 10 or len(t) - n < 10:
+            raise CliError(f"--split: {frac} leaves fewer than 10 samples on one side")
+        records["test"] = (U[n:], Y[n:])
+        times["test"] = t[n:]
+        U, Y, t = U[:n], Y[:n], t[:n]
+    if args.validate:
+        va = read_dataset(args.validate, inputs=train.inputs, outputs=train.outputs)
+        records["validation"] = (va.select(train.inputs), va.select(train.outputs))
+        times["validation"] = va.t
+    cfg = IdentifyConfig(hidden=args.hidden, narx=_narx(args.narx),
+                         smoothing_passes=args.smoothing, iterations=args.iterations,
+                         population=args.population, lm_epochs=args.epochs, lm_goal=args.goal)
+    algos = ["iboa", "boa", "cabc", "bp"] if args.algo == "all" else [args.algo]
+    result = compare(algos, U, Y, records=records, seeds=range(args.seeds), config=cfg,
+                     names=train.outputs, progress=not args.quiet)
+    models = result.pop("_models")
+    result["inputs"] = train.inputs
+    result["train_file"] = str(args.train)
+    summary = result["summary"]
+    for algo in algos:
+        s = summary[algo]
+        rec = s["records"]["test"]
+        mode = "free_run" if "free_run" in rec else "one_step"
+        rs = ", ".join(f"{o} {rec[mode][o]['r']['mean']:.3f}" for o in train.outputs
+                       if rec[mode][o]["r"]["mean"] is not None)
+        print(f"{algo:5s} fitness {s['fitness']['mean']:.4f} ± {s['fitness']['std']:.4f}  "
+              f"time {s['seconds']['mean']:.2f} s  test r ({mode}): {rs}")
+    for other, entry in result.get("rank_sum", {}).items():
+        for score, v in entry.items():
+            print(f"IBOA vs {other} on {score}: p = {v['p_value']:.3g} "
+                  f"({'IBOA better' if v['iboa_better'] else 'not significant'})")
+    if args.json:
+        Path(args.json).write_text(json.dumps(_finite(result), indent=1), encoding="utf-8")
+    if args.report:
+        from cdam_core.identify.report import write_report
+        result["_models"] = models
+        md = write_report(result, args.report, records=records, times=times,
+                          title=f"Identification of {Path(args.train).name}")
+        result.pop("_models")
+        print(f"report: {md}", file=sys.stderr)
+    if args.save:
+        from cdam_core.model_io import save_model
+        save_model(args.save, models[algos[0]], inputs=train.inputs, outputs=train.outputs,
+                   smoothing_passes=args.smoothing)
+        print(f"model: {args.save}", file=sys.stderr)
+    return 0

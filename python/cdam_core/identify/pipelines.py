@@ -1,0 +1,224 @@
+"""The identification pipelines: IBOA-BP, BOA-BP, CABC-BP and plain BP.
+
+One run (``identify``):
+1. preprocess: five-point cubic smoothing (``smoothing_passes`` passes) of the training inputs
+   and outputs; min-max scaling to [-1, 1] fitted on the training data only (inside
+   :class:`cdam_core.BPNetwork`);
+2. optimise the initial weights and thresholds with BOA / IBOA / CABC on the BP fitness (the
+   training MSE in normalised units of the network given by the individual, evaluated entirely
+   in C++); plain BP starts from uniform [-1, 1] weights drawn from ``Rng(seed)``;
+3. refine with Levenberg-Marquardt (trainlm semantics; Table 1: at most 50 epochs, goal 0.003);
+4. back-normalise the predictions (``BPNetwork.predict``) and evaluate per output
+   (:func:`evaluate`): Pearson r, RMSE, NRMSE, one-step and, for NARX models, free-run.
+The reported "fitness" is the adaptation value 1 / (1 + MSE) of the final training MSE.
+
+``backend="reference"`` runs the same pipeline on the numpy twins (reference optimisers and
+``cdam_core.reference.BPNetwork``): the benchmark's baseline.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from .metrics import adaptation_value, output_metrics
+
+__all__ = ["ALGORITHMS", "IdentifyConfig", "IdentifyRun", "identify", "evaluate", "preprocess"]
+
+ALGORITHMS = ("iboa", "boa", "cabc", "bp")
+
+
+@dataclass
+class IdentifyConfig:
+    """Settings of a pipeline run (defaults: the paper's Table 1 where it is readable).
+
+    ``boa_c`` and ``boa_a`` default to the BOA author's 0.01 and 0.1: Table 1's "c = 2" (with its
+    unexplained "rid" and "r") is not used by default. ``optimiser_options`` adds or overrides
+    any option of the C++ optimisers (see cdam_core.reference.optimisers).
+    """
+
+    hidden: int = 20
+    activation: str = "tansig"
+    narx: tuple | None = None
+    smoothing_passes: int = 5
+    population: int = 20          # g (BOA/IBOA butterflies) and Np (CABC colony)
+    iterations: int = 50          # Tmax
+    switch_probability: float = 0.8
+    boa_c: float = 0.01
+    boa_a: float = 0.1
+    boa_form: str = "author"
+    cabc_limit: int = 20
+    bounds: tuple = (-1.0, 1.0)
+    lm_epochs: int = 50
+    lm_goal: float = 0.003
+    threads: int = 2
+    optimiser_options: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        if self.hidden != "auto" and (not isinstance(self.hidden, (int, np.integer))
+                                      or self.hidden < 1):
+            raise ValueError(f"hidden: must be a positive integer, got {self.hidden!r}")
+        if not isinstance(self.smoothing_passes, (int, np.integer)) or self.smoothing_passes < 0:
+            raise ValueError("smoothing_passes: must be an integer >= 0")
+        for name in ("population", "iterations", "lm_epochs", "threads"):
+            v = getattr(self, name)
+            if not isinstance(v, (int, np.integer)) or v < (0 if name != "population" and
+                                                           name != "threads" else 1):
+                raise ValueError(f"{name}: must be a non-negative integer, got {v!r}")
+        if self.narx is not None:
+            narx = tuple(int(v) for v in self.narx)
+            if len(narx) != 3 or min(narx) < 0 or narx[0] + narx[1] < 1:
+                raise ValueError(f"narx: expected (na, nb, nk) >= 0 with na + nb >= 1, "
+                                 f"got {self.narx!r}")
+            self.narx = narx
+        lb, ub = (float(b) for b in self.bounds)
+        if not (np.isfinite(lb) and np.isfinite(ub) and lb < ub):
+            raise ValueError(f"bounds: expected finite (lb, ub) with lb < ub, got {self.bounds!r}")
+        self.bounds = (lb, ub)
+
+    def options(self, algo: str) -> dict:
+        """The optimiser options dict for ``algo`` ('boa', 'iboa', 'cabc')."""
+        o = {"n": int(self.population), "iterations": int(self.iterations),
+             "lb": self.bounds[0], "ub": self.bounds[1]}
+        if algo in ("boa", "iboa"):
+            o.update(p=self.switch_probability, c=self.boa_c, a=self.boa_a, form=self.boa_form)
+        else:
+            o.update(limit=int(self.cabc_limit))
+        extra = {k: v for k, v in self.optimiser_options.items()
+                 if algo == "iboa" or k not in ("clusters", "kmeans_iters", "phi",
+                                                "chaos_candidates", "chaos_form", "chaos_scale")}
+        if algo == "cabc":
+            extra = {k: v for k, v in extra.items() if k not in ("p", "c", "a", "form")}
+        else:
+            extra = {k: v for k, v in extra.items()
+                     if k not in ("limit", "scout_candidates", "scout_radius")}
+        o.update(extra)
+        return o
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["bounds"] = list(self.bounds)
+        d["narx"] = list(self.narx) if self.narx else None
+        return d
+
+
+@dataclass
+class IdentifyRun:
+    """The result of one pipeline run."""
+
+    algo: str
+    seed: int
+    model: object                   # fitted cdam_core.BPNetwork (or its reference twin)
+    curve: np.ndarray | None        # optimiser best MSE per iteration (Tmax + 1), None for bp
+    optimiser_mse: float | None     # best individual's training MSE before LM
+    evaluations: int
+    lm_mse: np.ndarray              # LM training MSE per epoch
+    final_mse: float
+    seconds: dict                   # optimise, lm, total
+
+    @property
+    def fitness(self) -> float:
+        """Adaptation value 1 / (1 + final training MSE)."""
+        return adaptation_value(self.final_mse)
+
+
+def preprocess(U, Y, passes: int):
+    """Smooth inputs and outputs (``passes`` five-point cubic passes; 0 = unchanged copies)."""
+    from cdam_core.preprocess import five_point_cubic_smooth
+    U = np.asarray(U, dtype=np.float64)
+    Y = np.asarray(Y, dtype=np.float64)
+    if passes == 0:
+        return U.copy(), Y.copy()
+    return five_point_cubic_smooth(U, passes), five_point_cubic_smooth(Y, passes)
+
+
+def _backend(name: str):
+    if name == "core":
+        from cdam_core import _core
+        from cdam_core.network import BPNetwork
+        from cdam_core.preprocess import MinMaxScaler
+
+        def optimise(algo, X, T, h, act, seed, options, threads):
+            return _core.optimise(algo, "bp", X=X, T=T, hidden=h, activation=act, seed=seed,
+                                  options=options, threads=threads)
+        return BPNetwork, MinMaxScaler, _core.narx_regressors, optimise
+    if name == "reference":
+        from cdam_core import reference as ref
+        from cdam_core.reference import optimisers as opt
+        from cdam_core.reference.network import BPNetwork
+
+        def optimise(algo, X, T, h, act, seed, options, threads):
+            f = opt.BpObjective(X, T, h, act)
+            return getattr(opt, algo)(f, f.dim, seed=seed, options=options)
+        return BPNetwork, ref.MinMaxScaler, ref.narx_regressors, optimise
+    raise ValueError(f"backend: unknown {name!r}; use 'core' or 'reference'")
+
+
+def identify(algo: str, U, Y, *, seed: int = 0, config: IdentifyConfig | None = None,
+             backend: str = "core", preprocessed: bool = False) -> IdentifyRun:
+    """Run one pipeline (``algo`` in 'iboa', 'boa', 'cabc', 'bp') on training inputs U (N, i)
+    and outputs Y (N, m). ``preprocessed=True`` skips the smoothing (already done)."""
+    if algo not in ALGORITHMS:
+        raise ValueError(f"algo: unknown {algo!r}; use one of {', '.join(ALGORITHMS)}")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < 2**32:
+        raise ValueError(f"seed: must be an integer in 0 .. 2**32 - 1, got {seed!r}")
+    cfg = config or IdentifyConfig()
+    U = np.asarray(U, dtype=np.float64)
+    Y = np.asarray(Y, dtype=np.float64)
+    if U.ndim != 2 or Y.ndim != 2 or U.shape[0] != Y.shape[0] or U.size == 0 or Y.size == 0:
+        raise ValueError(f"U, Y: expected non-empty (N, i) and (N, m) arrays with the same N, "
+                         f"got {U.shape} and {Y.shape}")
+    if not (np.all(np.isfinite(U)) and np.all(np.isfinite(Y))):
+        raise ValueError("U, Y: contain NaN or Inf")
+    Net, Scaler, regressors, optimise = _backend(backend)
+    t_start = time.perf_counter()
+    if not preprocessed:
+        U, Y = preprocess(U, Y, cfg.smoothing_passes)
+    net = Net(hidden=cfg.hidden, activation=cfg.activation, epochs=cfg.lm_epochs,
+              goal=cfg.lm_goal, narx=cfg.narx, seed=int(seed), threads=cfg.threads)
+    theta0, curve, opt_mse, evals = None, None, None, 0
+    t_opt = 0.0
+    if algo != "bp":
+        Us = Scaler().fit(U).transform(U)
+        Ys = Scaler().fit(Y).transform(Y)
+        if cfg.narx is None:
+            X, T = Us, Ys
+        else:
+            na, nb, nk = cfg.narx
+            X, T = regressors(Us, Ys, na, nb, nk), Ys[max(na, nk + nb - 1):]
+        t0 = time.perf_counter()
+        res = optimise(algo, X, T, cfg.hidden, cfg.activation, int(seed), cfg.options(algo),
+                       cfg.threads)
+        t_opt = time.perf_counter() - t0
+        theta0, curve = res["best"], np.asarray(res["curve"])
+        opt_mse, evals = float(res["best_fitness"]), int(res["evaluations"])
+    t0 = time.perf_counter()
+    net.fit(U, Y, theta0=theta0)
+    t_lm = time.perf_counter() - t0
+    lm_mse = np.asarray(net.history_["mse"], dtype=np.float64)
+    return IdentifyRun(algo=algo, seed=int(seed), model=net, curve=curve, optimiser_mse=opt_mse,
+                       evaluations=evals, lm_mse=lm_mse, final_mse=float(lm_mse[-1]),
+                       seconds={"optimise": t_opt, "lm": t_lm,
+                                "total": time.perf_counter() - t_start})
+
+
+def evaluate(model, U, Y, names=None, *, smoothing_passes: int = 0) -> dict:
+    """Per-output metrics of a fitted model on a record (U, Y).
+
+    The record is smoothed like the training data (``smoothing_passes``), and the metrics
+    compare the back-normalised predictions with these preprocessed measurements (as the
+    paper does). Returns {"one_step": {name: {r, rmse, nrmse, fit_percent}}, and for NARX
+    models "free_run": {...}}; NARX metrics skip the first t0 samples (they are given).
+    """
+    U, Y = preprocess(U, Y, smoothing_passes)
+    out = {}
+    t0 = getattr(model, "t0", 0)
+    P = model.predict(U, Y) if model.narx is not None else model.predict(U)
+    out["one_step"] = output_metrics(Y[t0:], P[t0:], names)
+    if model.narx is not None:
+        P = model.predict(U, Y, mode="free_run")
+        if not np.all(np.isfinite(P)):
+            raise ValueError("model: the free-run simulation diverged (NaN or Inf)")
+        out["free_run"] = output_metrics(Y[t0:], P[t0:], names)
+    return out

@@ -1,0 +1,321 @@
+"""The effect library: each effect a candidate regressor (or model change) with its parameters.
+
+An effect sits on one equation ("channel") of a declared model. It may
+- add columns (``regressors``): linear parameters estimated with the model's;
+- change the model (``transform_inputs`` on the whole record, ``transform_state`` on every
+  signal or state dict), with one scalar nonlinear parameter found by search (``search``).
+The same functions run on the measured signals (equation error) and on the simulated state
+(free run), so every effect is simulated exactly as it is estimated. The simulator's effects
+(issue 3) carry the same names; effects for the quadrotor models are defined here but apply only
+once those models exist.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+G0 = 9.81
+
+
+def smooth_sign(v, eps: float):
+    """sign(v), or tanh(v / eps) when ``eps`` > 0 (a smoothed sign)."""
+    return np.sign(v) if eps <= 0 else np.tanh(np.asarray(v) / eps)
+
+
+@dataclass(frozen=True)
+class Effect:
+    """Base class. ``channel`` is the equation the effect acts on."""
+
+    channel: str
+    name = ""
+    requires = ()
+    description = ""
+
+    @property
+    def key(self) -> str:
+        return f"{self.name}@{self.channel}"
+
+    # model compatibility and structure
+    def applies_to(self, model) -> bool:
+        return False
+
+    def regressors(self, s: dict, model) -> dict:
+        """``{equation: {parameter: column}}`` added to the model (parameters prefixed by key)."""
+        return {}
+
+    def transform_inputs(self, s: dict, model) -> dict:
+        return s
+
+    def transform_state(self, s: dict, model) -> dict:
+        return s
+
+    search = None   # (attribute, lower, upper) of a nonlinear parameter
+
+    def search_bounds(self, s: dict, model) -> tuple[float, float] | None:
+        return None if self.search is None else (self.search[1], self.search[2])
+
+    def with_value(self, x: float) -> "Effect":
+        return replace(self, **{self.search[0]: float(x)})
+
+    def parameters(self, theta: dict, model) -> dict:
+        """The effect's parameters in physical units, from the full estimate ``theta``."""
+        out = {k.split(".", 1)[1]: float(v) for k, v in theta.items() if k.startswith(self.key + ".")}
+        if self.search:
+            out[self.search[0]] = float(getattr(self, self.search[0]))
+        return out
+
+    def regressor_signal(self, s: dict, model) -> np.ndarray:
+        """One signal that shows the effect against the residual (for the report)."""
+        cols = self.regressors(s, model).get(self.channel, {})
+        if cols:
+            return np.asarray(next(iter(cols.values())), dtype=float)
+        return np.zeros_like(s["t"])
+
+
+def _p(effect: Effect, name: str) -> str:
+    return f"{effect.key}.{name}"
+
+
+@dataclass(frozen=True)
+class CoulombFriction(Effect):
+    """Dry friction ``Fc sign(v)`` on the channel's velocity (smoothed sign if ``eps`` > 0)."""
+
+    eps: float = 0.0
+    name = "coulomb_friction"
+
+    def applies_to(self, model) -> bool:
+        return self.channel in model.viscous
+
+    def regressors(self, s, model):
+        v = s[model.viscous[self.channel][1]]
+        return {self.channel: {_p(self, "Fc"): smooth_sign(v, self.eps)}}
+
+
+@dataclass(frozen=True)
+class AsymmetricFriction(Effect):
+    """Friction that differs with the direction: Fv+, Fc+ for v > 0 and Fv-, Fc- for v < 0.
+
+    Added on top of ``coulomb_friction``: one column ``v [v > 0]`` (Fv+ - Fv-), and where the
+    equation has no constant term a column ``[v > 0]`` (Fc+ - Fc-). With a constant term the
+    Coulomb asymmetry is the constant: Fc+ = Fc + offset, Fc- = Fc - offset (as published for
+    EMPS, whose asymmetric model has no offset).
+    """
+
+    name = "asymmetric_friction"
+    requires = ("coulomb_friction",)
+
+    def applies_to(self, model) -> bool:
+        return self.channel in model.viscous
+
+    def _has_offset(self, model):
+        return self.channel in model.offset
+
+    def regressors(self, s, model):
+        v = np.asarray(s[model.viscous[self.channel][1]], dtype=float)
+        pos = (v > 0).astype(float)
+        cols = {_p(self, "dFv"): v * pos}
+        if not self._has_offset(model):
+            cols[_p(self, "dFc")] = pos
+        return {self.channel: cols}
+
+    def parameters(self, theta, model):
+        fv = theta.get(model.viscous[self.channel][0], 0.0)
+        fc = theta.get(f"coulomb_friction@{self.channel}.Fc", 0.0)
+        dfv = theta.get(_p(self, "dFv"), 0.0)
+        if self._has_offset(model):
+            off = theta.get(model.offset[self.channel], 0.0)
+            fcp, fcn = fc + off, fc - off
+        else:
+            dfc = theta.get(_p(self, "dFc"), 0.0)
+            fcp, fcn = fc + dfc, fc
+        return {"Fv_pos": float(fv + dfv), "Fv_neg": float(fv), "Fc_pos": float(fcp),
+                "Fc_neg": float(fcn)}
+
+
+@dataclass(frozen=True)
+class Backlash(Effect):
+    """A dead band of total ``width`` (rad) in the cable: the spring acts on dz(deflection)."""
+
+    width: float = 0.0
+    name = "backlash"
+    search = ("width", 0.0, None)
+
+    def applies_to(self, model) -> bool:
+        return model.name == "flexible_joint" and self.channel == "tau_l"
+
+    def search_bounds(self, s, model):
+        return 0.0, float(np.max(np.abs(s["defl"])))
+
+    def transform_state(self, s, model):
+        h = 0.5 * self.width
+        d = s["defl"]
+        s = dict(s)
+        s["defl"] = np.sign(d) * np.maximum(np.abs(d) - h, 0.0)
+        return s
+
+    def regressor_signal(self, s, model):
+        return np.asarray(s["defl"] - self.transform_state(s, model)["defl"], dtype=float)
+
+
+@dataclass(frozen=True)
+class HardeningStiffness(Effect):
+    """A cubic cable spring: ``tau_l += K3 (thm - q)^3``."""
+
+    name = "hardening_stiffness"
+
+    def applies_to(self, model) -> bool:
+        return model.name == "flexible_joint" and self.channel == "tau_l"
+
+    def regressors(self, s, model):
+        d3 = np.asarray(s["defl"], dtype=float) ** 3
+        return {"tau_m": {_p(self, "K3"): d3}, "tau_l": {_p(self, "K3"): -d3}}
+
+
+@dataclass(frozen=True)
+class ActuatorDelay(Effect):
+    """The actuator applies the command ``delay`` seconds late: u(t) -> u(t - delay)."""
+
+    delay: float = 0.0
+    max_delay: float = 0.05
+    name = "actuator_delay"
+    search = ("delay", 0.0, 0.05)
+
+    def applies_to(self, model) -> bool:
+        return self.channel in model.inputs
+
+    def search_bounds(self, s, model):
+        # Shortest delay claimed: one sample and half a period of the derivative filter's
+        # cutoff (5 ms at 100 Hz). Shorter shifts are within the phase errors of the zero-order
+        # hold (half a sample), the filter and unmodelled fast dynamics (on EMPS with pulses a
+        # 1.3 ms "delay" would absorb the 24 Hz flexibility), so they are not resolved.
+        filt = s.get("filter")
+        lo = max(float(s["dt"]), 0.5 / filt.cutoff_hz if filt is not None else 0.0)
+        return lo, max(float(self.max_delay), lo)
+
+    def transform_inputs(self, s, model):
+        if self.delay <= 0:
+            return s
+        s = dict(s)
+        t = s["t"]
+        s[self.channel] = np.interp(t - self.delay, t, s[self.channel])
+        return s
+
+    def regressor_signal(self, s, model):
+        return np.asarray(self.transform_inputs(s, model)[self.channel] - s[self.channel], dtype=float)
+
+
+@dataclass(frozen=True)
+class PayloadMass(Effect):
+    """An extra point mass at the link tip (link length ``length``): adds m l^2 q'' + m g l sin q.
+
+    Only meaningful when the link inertia and gravity term are known (``fixed``); otherwise the
+    estimated I and G absorb it.
+    """
+
+    length: float = 0.3
+    name = "payload_mass"
+
+    def applies_to(self, model) -> bool:
+        return (model.name == "flexible_joint" and self.channel == "tau_l"
+                and {"I", "G"} <= set(model.fixed))
+
+    def regressors(self, s, model):
+        col = self.length ** 2 * s["q_dd"] + G0 * self.length * np.sin(s["q"])
+        return {"tau_l": {_p(self, "m"): col}}
+
+
+@dataclass(frozen=True)
+class ExternalForce(Effect):
+    """A measured channel left out of the model (load cell, second motor current): gain * u."""
+
+    column: str = ""
+    name = "external_force"
+
+    @property
+    def key(self) -> str:
+        return f"{self.name}[{self.column}]@{self.channel}"
+
+    def applies_to(self, model) -> bool:
+        return self.channel in model.equation_names
+
+    def regressors(self, s, model):
+        return {self.channel: {_p(self, "gain"): -np.asarray(s["extra"][self.column], dtype=float)}}
+
+    def parameters(self, theta, model):
+        out = super().parameters(theta, model)
+        out["column"] = self.column
+        return out
+
+
+_QUAD = ("quadrotor", "aerial_manipulator")
+
+
+@dataclass(frozen=True)
+class GroundEffect(Effect):
+    """Thrust gain near the ground (Cheeseman-Bennett): extra thrust T (R / 4Z)^2 on Z."""
+
+    rotor_radius: float = 0.12
+    name = "ground_effect"
+
+    def applies_to(self, model) -> bool:
+        return model.name in _QUAD and self.channel == "Z"
+
+    def regressors(self, s, model):
+        z = np.maximum(np.asarray(s["Z"], dtype=float), 1e-3)
+        return {"Z": {_p(self, "k"): -s["T"] * (self.rotor_radius / (4 * z)) ** 2}}
+
+
+@dataclass(frozen=True)
+class ThrustLoss(Effect):
+    """Thrust coefficient sagging with the battery: thrust T (1 - c t)."""
+
+    name = "thrust_loss"
+
+    def applies_to(self, model) -> bool:
+        return model.name in _QUAD and self.channel == "Z"
+
+    def regressors(self, s, model):
+        return {"Z": {_p(self, "c"): s["T"] * (s["t"] - s["t"][0])}}
+
+
+@dataclass(frozen=True)
+class ArmCoupling(Effect):
+    """Reaction of the swinging arm on the body (missing from model (8)): joint accelerations."""
+
+    name = "arm_coupling"
+
+    def applies_to(self, model) -> bool:
+        return model.name in _QUAD and self.channel in ("X", "Y", "Z")
+
+    def regressors(self, s, model):
+        return {self.channel: {_p(self, "k1"): s["q1_dd"], _p(self, "k2"): s["q2_dd"]}}
+
+
+LIBRARY = {c.name: c for c in (CoulombFriction, AsymmetricFriction, Backlash, HardeningStiffness,
+                               ActuatorDelay, PayloadMass, GroundEffect, ThrustLoss, ArmCoupling,
+                               ExternalForce)}
+
+
+def candidates(model, extra_columns=(), options: dict | None = None) -> list[Effect]:
+    """Every library effect that applies to ``model``, one per channel it can act on.
+
+    ``options`` maps an effect name to keyword arguments (``{"coulomb_friction": {"eps": 1e-3}}``).
+    """
+    options = options or {}
+    for k in options:
+        if k not in LIBRARY:
+            raise ValueError(f"options: unknown effect {k!r}")
+    channels = set(model.equation_names) | set(model.inputs)
+    out = []
+    for name, cls in LIBRARY.items():
+        if cls is ExternalForce:
+            continue
+        for ch in sorted(channels):
+            eff = cls(channel=ch, **options.get(name, {}))
+            if eff.applies_to(model):
+                out.append(eff)
+    for col in extra_columns:
+        for ch in model.equation_names:
+            out.append(ExternalForce(channel=ch, column=col))
+    return out

@@ -1,0 +1,214 @@
+"""Stepwise selection of missing effects (forward, as in FROLS).
+
+Each step fits every applicable candidate on top of the current model and ranks them by the
+error reduction ratio ERR = (SSE_current - SSE_candidate) / y'y (for one added regressor this
+is exactly FROLS's ERR of the orthogonalised regressor). A candidate counts only if it is
+significant: an F-test on its added parameters at level ``alpha`` using the effective sample
+size N_eff = N / tau_int of the candidate model's residual (diagnostics.effective_sample_size),
+and BIC computed on N_eff must fall. The best significant candidate is added, the model is
+re-estimated, and the loop repeats until the residual is white (Ljung-Box) or nothing is
+significant. Structure left over (spectral peaks) is reported as ``unexplained``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import optimize, stats
+
+from . import diagnostics as dg
+from .estimation import Fit, fit, free_run_error
+
+
+@dataclass
+class Candidate:
+    effect: object
+    fit: Fit
+    p: int
+    err: float
+    f_stat: float
+    pvalue: float
+    dbic: float
+    n_eff: float
+    tau_int: float
+
+    gain: float = 0.0   # (SSE_current - SSE_candidate) / SSE_current
+
+    @property
+    def significant(self) -> bool:
+        return bool(self.pvalue < self._alpha and self.dbic < 0 and self.gain >= self._min_gain)
+
+    _alpha: float = 0.01
+    _min_gain: float = 0.01
+
+
+@dataclass
+class Step:
+    candidate: Candidate
+    before: Fit
+    error_before: dict
+    error_after: dict
+    evidence: dict
+    ranking: list
+
+
+@dataclass
+class Selection:
+    model: object
+    declared: Fit
+    final: Fit
+    steps: list
+    declared_error: dict
+    white_after: bool
+    unexplained: list
+    settings: dict = field(default_factory=dict)
+    free_run: dict = field(default_factory=dict)   # label -> simulated positions
+
+
+def _yty(f: Fit) -> float:
+    tot = 0.0
+    for eq, r in f.residuals.items():
+        tot += float(np.sum(f.references[eq] ** 2))
+    return tot
+
+
+def _fit_with(model, sig, effects, eff, trim):
+    """Fit with ``eff`` added; a searched parameter is chosen by bounded 1-D search on SSE."""
+    if eff.search is None:
+        return eff, fit(model, sig, effects + (eff,), trim)
+    lo, hi = eff.search_bounds(sig, model)
+    if not hi > lo:
+        return eff, fit(model, sig, effects + (eff,), trim)
+    grid = np.linspace(lo, hi, 13)
+    sse = [fit(model, sig, effects + (eff.with_value(x),), trim).sse for x in grid]
+    i = int(np.argmin(sse))
+    a, b = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
+    res = optimize.minimize_scalar(
+        lambda x: fit(model, sig, effects + (eff.with_value(x),), trim).sse,
+        bounds=(a, b), method="bounded", options={"xatol": (hi - lo) * 1e-4})
+    x = res.x if res.fun < sse[i] else grid[i]
+    e = eff.with_value(x)
+    return e, fit(model, sig, effects + (e,), trim)
+
+
+def evaluate(model, sig, current: Fit, eff, alpha: float = 0.01, trim: int = 50,
+             min_gain: float = 0.01) -> Candidate:
+    """Fit ``current`` + ``eff`` and test it (ERR, F-test on N_eff, BIC on N_eff).
+
+    ``min_gain``: the smallest share of the current residual sum of squares an effect must
+    remove to be claimed (1 %): with 10^4 samples a model mismatch far below any practical
+    interest (derivative-filter bias, integration error) is otherwise "significant".
+    """
+    eff, f1 = _fit_with(model, sig, current.effects, eff, trim)
+    p = max(1, f1.k - current.k + (1 if eff.search else 0))
+    sse0, sse1 = current.sse, f1.sse
+    taus = [dg.effective_sample_size(r)["tau_int"] for r in f1.residuals.values()]
+    tau = max(taus)
+    n_eff = f1.n_rows / tau
+    k1 = f1.k + sum(1 for e in f1.effects if e.search)
+    dof = max(n_eff - k1, 1.0)
+    gain = max(sse0 - sse1, 0.0)
+    f_stat = (gain / p) / (sse1 / dof) if sse1 > 0 else np.inf
+    pval = float(stats.f.sf(f_stat, p, dof))
+    dbic = n_eff * np.log(max(sse1, 1e-300) / max(sse0, 1e-300)) + p * np.log(n_eff)
+    if eff.search is not None:  # an optimum on the edge of the search range is not identified
+        lo, hi = eff.search_bounds(sig, model)
+        x = getattr(eff, eff.search[0])
+        if hi > lo and min(x - lo, hi - x) <= 0.01 * (hi - lo):
+            pval, dbic = 1.0, float("inf")
+    c = Candidate(eff, f1, p, gain / _yty(current), float(f_stat), pval, float(dbic),
+                  float(n_eff), float(tau))
+    c._alpha = alpha
+    c.gain = gain / sse0 if sse0 > 0 else 0.0
+    c._min_gain = min_gain
+    return c
+
+
+def _requirements_met(eff, effects) -> bool:
+    have = {(e.name, e.channel) for e in effects}
+    return all((r, eff.channel) in have for r in eff.requires)
+
+
+def _errors(f: Fit, sig_fr, free_run: bool, substeps, store=None, label=""):
+    out = dict(f.equation_error())
+    if free_run:
+        fr, sim = free_run_error(f, sig_fr, substeps)
+        out.update(fr)
+        if store is not None:
+            store[label] = sim
+    return out
+
+
+def select(model, sig: dict, candidates, alpha: float = 0.01, max_steps: int = 5,
+           trim: int = 50, free_run: bool = True, validation: dict | None = None,
+           substeps: int | None = None, lags: int = 25, min_prominence: float = 1.0,
+           spectrum_seconds: float = 0.25, min_gain: float = 0.01) -> Selection:
+    """Run the stepwise selection on the prepared signals ``sig``.
+
+    ``validation``: prepared signals of another record on which the free-run errors are
+    computed (default: the same record). Returns a :class:`Selection`.
+    """
+    if not 0 < alpha < 1:
+        raise ValueError(f"alpha: must be in (0, 1), got {alpha}")
+    if int(max_steps) < 0:
+        raise ValueError(f"max_steps: must be >= 0, got {max_steps}")
+    for c in candidates:
+        if not c.applies_to(model):
+            raise ValueError(f"candidates: {c.key} does not apply to {model.name}")
+    sig_fr = validation if validation is not None else sig
+    store: dict = {}
+    declared = fit(model, sig, (), trim)
+    current = declared
+    err_current = _errors(declared, sig_fr, free_run, substeps, store, "declared")
+    declared_error = dict(err_current)
+    steps = []
+    fs = 1.0 / sig["dt"]
+    for _ in range(int(max_steps)):
+        if all(dg.whiteness(r, lags)["white"] for r in current.residuals.values()):
+            break
+        have = {e.key for e in current.effects}
+        have_names = {(e.name, e.channel) for e in current.effects}
+        pool = [e for e in candidates if e.key not in have and (e.name, e.channel) not in have_names
+                and _requirements_met(e, current.effects)]
+        if not pool:
+            break
+        ranked = sorted((evaluate(model, sig, current, e, alpha, trim, min_gain) for e in pool),
+                        key=lambda c: -c.err)
+        best = next((c for c in ranked if c.significant), None)
+        if best is None:
+            break
+        ch = best.effect.channel if best.effect.channel in current.residuals else \
+            next(iter(current.residuals))
+        r0, r1 = current.residuals[ch], best.fit.residuals[ch]
+        reg = best.effect.regressor_signal(best.fit.signals, model)[current.keep]
+        err_after = _errors(best.fit, sig_fr, free_run, substeps, store,
+                            f"after {best.effect.key}")
+        evidence = {
+            "err": best.err, "sse_share_removed": best.gain, "f_statistic": best.f_stat, "p_value": best.pvalue,
+            "added_parameters": best.p, "delta_bic": best.dbic, "n": best.fit.n_rows,
+            "n_eff": best.n_eff, "tau_int": best.tau_int,
+            "ljung_box_before": dg.ljung_box(r0, lags), "ljung_box_after": dg.ljung_box(r1, lags),
+            "regressor_residual_correlation": float(np.corrcoef(reg, r0)[0, 1])
+            if np.std(reg) > 0 else 0.0,
+            "runner_up": ({"effect": ranked[1].effect.key, "err": ranked[1].err,
+                           "p_value": ranked[1].pvalue} if len(ranked) > 1 else None),
+        }
+        steps.append(Step(best, current, err_current, err_after, evidence,
+                          [(c.effect.key, c.err, c.pvalue, c.dbic) for c in ranked]))
+        current, err_current = best.fit, err_after
+    white = all(dg.whiteness(r, lags)["white"] for r in current.residuals.values())
+    unexplained = []
+    # above the derivative filter's band the equation error holds only the unfiltered
+    # measured torque, and differentiated noise rises towards the cutoff (a hump that is the
+    # filter's shape, not structure), so peaks are sought below 0.5 x cutoff
+    fmax = 0.5 * sig["filter"].cutoff_hz if "filter" in sig else None
+    for eq, r in current.residuals.items():
+        for pk in dg.spectral_peaks(r, fs, min_prominence=min_prominence, fmax=fmax,
+                                    seconds=spectrum_seconds):
+            ac = dg.autocorrelation(r, lags)
+            unexplained.append({"kind": "spectral_peak", "channel": eq, **pk,
+                                "acf_lags_outside_band": len(ac["outside"])})
+    settings = {"alpha": alpha, "min_gain": min_gain, "trim": trim, "lags": lags, "min_prominence_decades": min_prominence,
+                "candidates": [c.key for c in candidates]}
+    return Selection(model, declared, current, steps, declared_error, white, unexplained,
+                     settings, store)

@@ -1,0 +1,73 @@
+"""Diagnostics against independent computations (numpy formulas, statsmodels, theory)."""
+import numpy as np
+import pytest
+from statsmodels.stats.diagnostic import acorr_ljungbox
+
+from cdam_core.residual import diagnostics as dg
+
+
+def _ar1(phi, n, seed=0):
+    rng = np.random.default_rng(seed)
+    e = rng.normal(size=n)
+    x = np.empty(n)
+    x[0] = e[0]
+    for k in range(1, n):
+        x[k] = phi * x[k - 1] + e[k]
+    return x
+
+
+def test_autocorrelation_and_band_match_numpy():
+    x = _ar1(0.6, 3000)
+    ac = dg.autocorrelation(x, 25)
+    xc = x - x.mean()
+    ref = [np.sum(xc[k:] * xc[:xc.size - k]) / np.sum(xc * xc) for k in range(26)]
+    np.testing.assert_allclose(ac["acf"], ref, atol=1e-10)
+    assert ac["band"] == pytest.approx(2.58 / np.sqrt(3000))
+    assert 1 in ac["outside"]
+
+
+def test_cross_correlation_finds_the_lag():
+    rng = np.random.default_rng(1)
+    u = rng.normal(size=5000)
+    r = np.roll(u, 7)          # r(t) = u(t - 7)
+    cc = dg.cross_correlation(r, u, 25)
+    assert cc["lags"][np.argmax(cc["ccf"])] == 7
+    assert cc["ccf"].max() == pytest.approx(1.0, abs=0.01)
+
+
+@pytest.mark.parametrize("n", [500, 5000])
+def test_ljung_box_matches_statsmodels(n):
+    x = _ar1(0.1, n, seed=2)
+    ref = acorr_ljungbox(x, lags=[25])
+    lb = dg.ljung_box(x, 25)
+    assert lb["statistic"] == pytest.approx(float(ref["lb_stat"].iloc[0]), rel=1e-9)
+    assert lb["pvalue"] == pytest.approx(float(ref["lb_pvalue"].iloc[0]), rel=1e-6, abs=1e-12)
+
+
+def test_white_noise_is_white_and_ar1_is_not():
+    rng = np.random.default_rng(3)
+    assert dg.whiteness(rng.normal(size=4000))["white"]
+    assert not dg.whiteness(_ar1(0.5, 4000))["white"]
+
+
+def test_effective_sample_size_of_ar1_matches_theory():
+    phi = 0.8
+    x = _ar1(phi, 100000, seed=4)
+    ess = dg.effective_sample_size(x)
+    assert ess["tau_int"] == pytest.approx((1 + phi) / (1 - phi), rel=0.1)
+
+
+def test_spectral_peak_of_a_sinusoid_in_noise():
+    rng = np.random.default_rng(5)
+    t = np.arange(20000) / 1000
+    x = rng.normal(size=t.size) + 2 * np.sin(2 * np.pi * 37 * t)
+    pk = dg.spectral_peaks(x, 1000.0)
+    assert abs(pk[0]["frequency_hz"] - 37) <= 2
+    assert dg.spectral_peaks(rng.normal(size=20000), 1000.0) == []
+
+
+@pytest.mark.parametrize("bad,match", [([], "empty"), ([1.0, np.nan, 2.0], "NaN"),
+                                       (np.ones((3, 3)), "1-D")])
+def test_bad_input_rejected(bad, match):
+    with pytest.raises(ValueError, match=match):
+        dg.ljung_box(bad, 1)
