@@ -26,6 +26,11 @@ _LAZY = {
     "save_model": "model_io",
     "read_dataset": "dataset",
     "write_dataset": "dataset",
+    "simulate_flight": "sim",
+    "write_flight": "sim",
+    "identify": "identify",
+    "IdentifyConfig": "identify",
+    "analyse_residual": "residual",
 }
 
 __all__ = sorted(_LAZY) + ["__version__"]
@@ -35,7 +40,8 @@ def __getattr__(name: str):
     mod = _LAZY.get(name)
     if mod is None:
         raise AttributeError(f"module 'cdam_core' has no attribute {name!r}")
-    value = getattr(importlib.import_module(f"cdam_core.{mod}"), name)
+    attr = "analyse" if name == "analyse_residual" else name
+    value = getattr(importlib.import_module(f"cdam_core.{mod}"), attr)
     globals()[name] = value
     return value
 

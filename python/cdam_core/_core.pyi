@@ -1,45 +1,105 @@
-"""Type stubs of the private compiled core cdam_core._core (use the cdam_core package)."""
-from typing import Callable, Optional, Tuple
-
-import numpy as np
-from numpy.typing import NDArray
-
-__version__: str
-
-def five_point_cubic_smooth(y: NDArray[np.floating], passes: int = 1) -> NDArray[np.floating]: ...
-def minmax_fit(X: NDArray[np.floating]) -> Tuple[NDArray[np.floating], NDArray[np.floating]]: ...
-def minmax_apply(X: NDArray[np.floating], data_min: NDArray[np.floating], data_max: NDArray[np.floating],
-                 inverse: bool = False) -> NDArray[np.floating]: ...
-def mlp_num_params(inputs: int, hidden: int, outputs: int) -> int: ...
-def mlp_forward(theta: NDArray[np.floating], X: NDArray[np.floating], hidden: int, outputs: int,
-                activation: str = "tansig") -> NDArray[np.floating]: ...
-def mlp_mse_gradient(theta: NDArray[np.floating], X: NDArray[np.floating], T: NDArray[np.floating],
-                     hidden: int, activation: str = "tansig") -> Tuple[float, NDArray[np.floating]]: ...
-def mlp_jacobian(theta: NDArray[np.floating], X: NDArray[np.floating], hidden: int, outputs: int,
-                 activation: str = "tansig") -> NDArray[np.floating]: ...
-def mlp_jtj(theta: NDArray[np.floating], X: NDArray[np.floating], T: NDArray[np.floating], hidden: int,
-            activation: str = "tansig", threads: int = 1
-            ) -> Tuple[NDArray[np.floating], NDArray[np.floating], float]: ...
-def train_lm(theta0: NDArray[np.floating], X: NDArray[np.floating], T: NDArray[np.floating], hidden: int,
-             activation: str = "tansig", *, epochs: int = 1000, goal: float = 0.0, mu: float = 1e-3,
-             mu_dec: float = 0.1, mu_inc: float = 10.0, mu_max: float = 1e10, min_grad: float = 1e-7,
-             max_fail: int = 6, X_val: Optional[NDArray[np.floating]] = None,
-             T_val: Optional[NDArray[np.floating]] = None, threads: int = 2,
-             callback: Optional[Callable[[int, float], Optional[bool]]] = None
-             ) -> Tuple[NDArray[np.floating], dict]: ...
-def train_gd(theta0: NDArray[np.floating], X: NDArray[np.floating], T: NDArray[np.floating], hidden: int,
-             activation: str = "tansig", *, lr: float = 0.01, epochs: int = 1000, goal: float = 0.0,
-             threads: int = 2, callback: Optional[Callable[[int, float], Optional[bool]]] = None
-             ) -> Tuple[NDArray[np.floating], dict]: ...
-def narx_regressors(U: NDArray[np.floating], Y: NDArray[np.floating], na: int, nb: int, nk: int
-                    ) -> NDArray[np.floating]: ...
-def narx_simulate(theta: NDArray[np.floating], U: NDArray[np.floating], Y0: NDArray[np.floating],
-                  hidden: int, activation: str, na: int, nb: int, nk: int) -> NDArray[np.floating]: ...
-
+"""
+cdam_core._core: the C++/Eigen core (private; use the cdam_core package)
+"""
+from __future__ import annotations
+import numpy
+import numpy.typing
+import typing
+__all__: list[str] = ['Rng', 'SIM_CONTROL_SIZE', 'SIM_NLOG', 'SIM_NSP', 'SIM_NU', 'SIM_NX', 'SIM_PLANT_SIZE', 'bp_fitness', 'five_point_cubic_smooth', 'minmax_apply', 'minmax_fit', 'mlp_forward', 'mlp_jacobian', 'mlp_jtj', 'mlp_mse_gradient', 'mlp_num_params', 'narx_regressors', 'narx_simulate', 'optimise', 'sim_closed_loop', 'sim_fastest_rate', 'sim_open_loop', 'sim_rhs', 'sim_substeps', 'train_gd', 'train_lm']
 class Rng:
-    def __init__(self, seed: int = 0) -> None: ...
-    def next_u32(self) -> int: ...
-    def uniform(self, a: float = 0.0, b: float = 1.0) -> float: ...
-    def index(self, n: int) -> int: ...
-    def normal(self) -> float: ...
-    def uniform_array(self, n: int, a: float = 0.0, b: float = 1.0) -> NDArray[np.float64]: ...
+    """
+    xoshiro128** with splitmix32 seeding; the numpy twin draws the same stream.
+    """
+    def __init__(self, seed: typing.SupportsInt | typing.SupportsIndex = 0) -> None:
+        ...
+    def index(self, n: typing.SupportsInt | typing.SupportsIndex) -> int:
+        ...
+    def next_u32(self) -> int:
+        ...
+    def normal(self) -> float:
+        ...
+    def uniform(self, a: typing.SupportsFloat | typing.SupportsIndex = 0.0, b: typing.SupportsFloat | typing.SupportsIndex = 1.0) -> float:
+        ...
+    def uniform_array(self, n: typing.SupportsInt | typing.SupportsIndex, a: typing.SupportsFloat | typing.SupportsIndex = 0.0, b: typing.SupportsFloat | typing.SupportsIndex = 1.0) -> numpy.typing.NDArray[numpy.float64]:
+        ...
+def bp_fitness(thetas: numpy.ndarray, X: numpy.ndarray, T: numpy.ndarray, hidden: typing.SupportsInt | typing.SupportsIndex, activation: str = 'tansig', threads: typing.SupportsInt | typing.SupportsIndex = 2) -> numpy.ndarray:
+    """
+    Training MSE sum((T - Y)^2) / (N m) of each theta (rows of a (n, D) array, or one (D,)); deterministic for any thread count.
+    """
+def five_point_cubic_smooth(y: numpy.ndarray, passes: typing.SupportsInt | typing.SupportsIndex = 1) -> numpy.ndarray:
+    """
+    Five-point cubic smoothing, `passes` times, per column of a (N,) or (N, C) array.
+    """
+def minmax_apply(X: numpy.ndarray, data_min: numpy.ndarray, data_max: numpy.ndarray, inverse: bool = False) -> numpy.ndarray:
+    """
+    Scale to [-1, 1] (or back with inverse=True); constant columns map to 0.
+    """
+def minmax_fit(X: numpy.ndarray) -> tuple:
+    """
+    Per-column (min, max) of a (N, C) array.
+    """
+def mlp_forward(theta: numpy.ndarray, X: numpy.ndarray, hidden: typing.SupportsInt | typing.SupportsIndex, outputs: typing.SupportsInt | typing.SupportsIndex, activation: str = 'tansig') -> numpy.ndarray:
+    """
+    Network outputs (N, m) for inputs X (N, i); theta = [W1(:); b1; W2(:); b2].
+    """
+def mlp_jacobian(theta: numpy.ndarray, X: numpy.ndarray, hidden: typing.SupportsInt | typing.SupportsIndex, outputs: typing.SupportsInt | typing.SupportsIndex, activation: str = 'tansig') -> numpy.ndarray:
+    """
+    Jacobian (N m, D) of the outputs; row n m + k is d Y[n, k] / d theta.
+    """
+def mlp_jtj(theta: numpy.ndarray, X: numpy.ndarray, T: numpy.ndarray, hidden: typing.SupportsInt | typing.SupportsIndex, activation: str = 'tansig', threads: typing.SupportsInt | typing.SupportsIndex = 1) -> tuple:
+    """
+    (J'J, J'e, sse) accumulated in blocks without forming J; e = T - Y.
+    """
+def mlp_mse_gradient(theta: numpy.ndarray, X: numpy.ndarray, T: numpy.ndarray, hidden: typing.SupportsInt | typing.SupportsIndex, activation: str = 'tansig') -> tuple:
+    """
+    (mse, d mse / d theta) by backpropagation; mse = sum((T - Y)^2) / (N m).
+    """
+def mlp_num_params(inputs: typing.SupportsInt | typing.SupportsIndex, hidden: typing.SupportsInt | typing.SupportsIndex, outputs: typing.SupportsInt | typing.SupportsIndex) -> int:
+    ...
+def narx_regressors(U: numpy.ndarray, Y: numpy.ndarray, na: typing.SupportsInt | typing.SupportsIndex, nb: typing.SupportsInt | typing.SupportsIndex, nk: typing.SupportsInt | typing.SupportsIndex) -> numpy.ndarray:
+    """
+    Lagged regressors (N - t0, na m + nb i): [y(t-1..t-na), u(t-nk..t-nk-nb+1)], channels fastest.
+    """
+def narx_simulate(theta: numpy.ndarray, U: numpy.ndarray, Y0: numpy.ndarray, hidden: typing.SupportsInt | typing.SupportsIndex, activation: str, na: typing.SupportsInt | typing.SupportsIndex, nb: typing.SupportsInt | typing.SupportsIndex, nk: typing.SupportsInt | typing.SupportsIndex) -> numpy.ndarray:
+    """
+    Free-run simulation (N, m): Y0 holds the first t0 outputs; predictions are fed back.
+    """
+def optimise(algorithm: str, objective: str = 'bp', *, X: typing.Any = None, T: typing.Any = None, hidden: typing.SupportsInt | typing.SupportsIndex = 1, activation: str = 'tansig', dim: typing.SupportsInt | typing.SupportsIndex = 1, seed: typing.SupportsInt | typing.SupportsIndex = 0, options: typing.Any = None, threads: typing.SupportsInt | typing.SupportsIndex = 2) -> dict:
+    """
+    Run BOA, IBOA or CABC (algorithm 'boa'|'iboa'|'cabc') on the BP fitness (training MSE of the network given by the individual on X (N, i), T (N, m)) or a test function ('sphere', 'rastrigin' of `dim` variables). Returns a dict: best, best_fitness, curve (iterations + 1), evaluations, positions (n, D), fitness (n).
+    """
+def sim_closed_loop(plant: numpy.ndarray, control: numpy.ndarray, x0: numpy.ndarray, setpoints: numpy.ndarray, dt: typing.SupportsFloat | typing.SupportsIndex, substeps: typing.SupportsInt | typing.SupportsIndex) -> tuple[numpy.typing.NDArray[numpy.float64], numpy.typing.NDArray[numpy.float64]]:
+    """
+    Closed-loop flight: (states (N, 21), log (N, 10)) for setpoints (N, 8).
+    """
+def sim_fastest_rate(plant: numpy.ndarray) -> float:
+    """
+    Fastest motor-side mode bound (rad/s) used for the RK4 sub-step rule.
+    """
+def sim_open_loop(plant: numpy.ndarray, x0: numpy.ndarray, U: numpy.ndarray, dt: typing.SupportsFloat | typing.SupportsIndex, substeps: typing.SupportsInt | typing.SupportsIndex) -> numpy.typing.NDArray[numpy.float64]:
+    """
+    States (N+1, 21) under inputs U (N, 6) held for dt each.
+    """
+def sim_rhs(plant: numpy.ndarray, t: typing.SupportsFloat | typing.SupportsIndex, x: numpy.ndarray, u: numpy.ndarray) -> numpy.typing.NDArray[numpy.float64]:
+    """
+    dx/dt of the coupled aerial manipulator (state 21, input 6: rotor speeds, motor torques).
+    """
+def sim_substeps(plant: numpy.ndarray, dt: typing.SupportsFloat | typing.SupportsIndex) -> int:
+    """
+    RK4 sub-steps per dt so that h * fastest_rate <= 2.5.
+    """
+def train_gd(theta0: numpy.ndarray, X: numpy.ndarray, T: numpy.ndarray, hidden: typing.SupportsInt | typing.SupportsIndex, activation: str = 'tansig', *, lr: typing.SupportsFloat | typing.SupportsIndex = 0.01, epochs: typing.SupportsInt | typing.SupportsIndex = 1000, goal: typing.SupportsFloat | typing.SupportsIndex = 0.0, threads: typing.SupportsInt | typing.SupportsIndex = 2, callback: typing.Any = None) -> tuple:
+    """
+    Plain batch gradient-descent BP on the MSE; returns (theta, history).
+    """
+def train_lm(theta0: numpy.ndarray, X: numpy.ndarray, T: numpy.ndarray, hidden: typing.SupportsInt | typing.SupportsIndex, activation: str = 'tansig', *, epochs: typing.SupportsInt | typing.SupportsIndex = 1000, goal: typing.SupportsFloat | typing.SupportsIndex = 0.0, mu: typing.SupportsFloat | typing.SupportsIndex = 0.001, mu_dec: typing.SupportsFloat | typing.SupportsIndex = 0.1, mu_inc: typing.SupportsFloat | typing.SupportsIndex = 10.0, mu_max: typing.SupportsFloat | typing.SupportsIndex = 10000000000.0, min_grad: typing.SupportsFloat | typing.SupportsIndex = 1e-07, max_fail: typing.SupportsInt | typing.SupportsIndex = 6, X_val: typing.Any = None, T_val: typing.Any = None, threads: typing.SupportsInt | typing.SupportsIndex = 2, callback: typing.Any = None) -> tuple:
+    """
+    Levenberg-Marquardt with trainlm's semantics; returns (theta, history).
+    """
+SIM_CONTROL_SIZE: int = 26
+SIM_NLOG: int = 10
+SIM_NSP: int = 8
+SIM_NU: int = 6
+SIM_NX: int = 21
+SIM_PLANT_SIZE: int = 51
+__version__: str = '0.1.0'
