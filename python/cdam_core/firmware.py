@@ -530,10 +530,11 @@ def _free_port() -> int:
 
 
 def closed_loop_pil(build_dir, duration: float = 2.0, reference=default_reference,
-                    plant: JointPlant | None = None, *, timeout: float = 120.0) -> dict:
+                    plant: JointPlant | None = None, *, timeout: float | None = None) -> dict:
     """Check (4): fw_loop.elf under QEMU, the plant in Python, python-can over SLCAN on the
     emulated USART1 (``-serial tcp:127.0.0.1:PORT,server=on,wait=on``).
 
+    ``timeout`` (seconds of wall time for QEMU) defaults to 60 + 0.25 s per cycle.
     Lock-step: each period sends the reference (0x300) and both feedback frames, waits for the
     0x200 command and the 0x3F0 diagnostic, then advances the plant one period. Returns the
     same arrays as closed_loop_python plus frames_sent, frames_received, cycles (the
@@ -546,6 +547,8 @@ def closed_loop_pil(build_dir, duration: float = 2.0, reference=default_referenc
     if n < 1:
         raise ValueError(f"duration: must be at least one period, got {duration}")
     plant = plant or JointPlant()
+    if timeout is None:  # QEMU's USART takes about 1 ms per received byte: ~0.1 s per cycle
+        timeout = 60.0 + 0.25 * n
     port = _free_port()
     elf = Path(build_dir).resolve() / "fw_loop.elf"
     if not elf.is_file():
@@ -572,6 +575,12 @@ def closed_loop_pil(build_dir, duration: float = 2.0, reference=default_referenc
                 if time.monotonic() > deadline or proc.poll() is not None:
                     raise
                 time.sleep(0.05)
+        # The emulated USART drops bytes that arrive before the firmware enables it, so the
+        # open sequence python-can sent may be lost: wait for an answer to "V", then open.
+        while bus.get_version(0.5)[0] is None:
+            if time.monotonic() > deadline or proc.poll() is not None:
+                raise RuntimeError("the firmware does not answer on the SLCAN port")
+        bus.open()
         for k in range(n):
             t = k * dt
             r = np.asarray(reference(t), dtype=float)
