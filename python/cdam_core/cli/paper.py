@@ -1,0 +1,89 @@
+"""`cdam paper`: the paper's study (Tables 2 and 3, Figs. 8-15) on simulated flights."""
+from __future__ import annotations
+
+from cdam_core.cli.main import CliError
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "paper", help="reproduce the paper's Tables 2 and 3 and Figs. 8-15 on simulated flights",
+        description="Simulate experiments (i) and (ii) and their validation records, identify with "
+                    "IBOA-BP, BOA-BP and CABC-BP (static map, then NARX), and write index.md/html, "
+                    "results.json, predictions.npz, figures and the records into --out.")
+    p.add_argument("--seeds", type=int, default=4,
+                   help="identification seeds per algorithm (default 4: the fewest for which a "
+                        "rank-sum test can reach p < 0.05)")
+    p.add_argument("--out", default="paper_out", help="output folder (default paper_out)")
+    p.add_argument("--rate", type=float, default=200.0,
+                   help="training/evaluation rate in Hz after smoothing at 1 kHz (default 200; "
+                        "1000 = no decimation)")
+    p.add_argument("--smoothing", type=int, default=5,
+                   help="five-point smoothing passes (default 5)")
+    p.add_argument("--narx", default="2,2,1",
+                   help="NARX orders na,nb,nk of the second section, or 'none' (default 2,2,1)")
+    p.add_argument("--flight-seed", type=int, default=0, help="seed of the simulated flights")
+    p.add_argument("--duration", type=float, default=20.0,
+                   help="seconds per experiment record (validation records: half; default 20)")
+    p.add_argument("--hidden", type=int, default=20, help="hidden nodes (default 20)")
+    p.add_argument("--iterations", type=int, default=50, help="Tmax (default 50)")
+    p.add_argument("--population", type=int, default=20, help="g and CABC Np (default 20)")
+    p.add_argument("--epochs", type=int, default=50, help="LM epochs at most (default 50)")
+    p.add_argument("--effect", action="append", default=[], metavar="NAME[:param=value,...]",
+                   help="extra simulator effect (repeatable; see cdam simulate --list-effects)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+
+
+def _narx(text):
+    if text is None or text.strip().lower() in ("none", "off", ""):
+        return None
+    try:
+        v = tuple(int(x) for x in text.split(","))
+    except ValueError:
+        raise CliError(f"--narx: expected na,nb,nk integers or 'none', got {text!r}") from None
+    if len(v) != 3 or min(v) < 0 or v[0] + v[1] < 1:
+        raise CliError(f"--narx: expected na,nb,nk >= 0 with na + nb >= 1, got {text!r}")
+    return v
+
+
+def run(args) -> int:
+    import sys
+
+    from cdam_core.paper import PaperConfig, check_out_dir, run_paper
+
+    if args.seeds < 1:
+        raise CliError(f"--seeds: must be >= 1, got {args.seeds}")
+    for name in ("hidden", "population", "epochs"):
+        if getattr(args, name) < 1:
+            raise CliError(f"--{name}: must be >= 1, got {getattr(args, name)}")
+    if args.iterations < 0 or args.smoothing < 0:
+        raise CliError("--iterations/--smoothing: must be >= 0")
+    if not args.duration > 0:
+        raise CliError(f"--duration: must be positive, got {args.duration}")
+    try:
+        check_out_dir(args.out)
+    except ValueError as exc:
+        raise CliError(f"--out: {str(exc).removeprefix('out: ')}") from None
+    try:
+        cfg = PaperConfig(seeds=args.seeds, flight_seed=args.flight_seed, duration=args.duration,
+                          rate=args.rate, smoothing=args.smoothing, hidden=args.hidden,
+                          population=args.population, iterations=args.iterations,
+                          lm_epochs=args.epochs, narx=_narx(args.narx), effects=list(args.effect))
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    result = run_paper(cfg, args.out, progress=not args.quiet)
+    algo = cfg.algos[0]
+    for rec, label in (("test", "Table 2"), ("validation", "Table 3")):
+        print(f"{label}, {algo} mean r (yes: every algorithm reaches its published r)")
+        for o, flags in result["reach"].items():
+            cells = []
+            for sec, t in result["tables"].items():
+                for mode, rows in t["r"][rec].items():
+                    m = rows[o][algo]["mean"]
+                    cells.append(f"{sec} {mode.replace('_', '-')} "
+                                 f"{'n/a' if m is None else format(m, '.4f')} "
+                                 f"{'yes' if flags[f'{sec}/{rec}/{mode}'] else 'no'}")
+            paper = result["published"]["table2" if rec == "test" else "table3"][o][algo]
+            print(f"  {o:6s} paper {paper:.4f} | " + " | ".join(cells))
+    print(f"index: {args.out}/index.md ({result['seconds']['total']:.1f} s)", file=sys.stderr)
+    return 0

@@ -1,0 +1,14 @@
+"""``cdam paper``: the paper's identification study (Tables 2 and 3, Figs. 8-15) on simulated
+flights, with a NARX section, beside the published values.
+
+>>> from cdam_core.paper import PaperConfig, run_paper
+>>> result = run_paper(PaperConfig(seeds=4), "paper_out")    # doctest: +SKIP
+"""
+from .pipeline import check_out_dir, run_paper
+from .published import FITNESS, RUN_TIME_S, TABLE2, TABLE3
+from .records import DATA_DESIGN, prepare_data, simulate_records
+from .runner import PaperConfig, evaluate_segments, run_section
+
+__all__ = ["DATA_DESIGN", "FITNESS", "PaperConfig", "RUN_TIME_S", "TABLE2", "TABLE3",
+           "check_out_dir", "evaluate_segments", "prepare_data", "run_paper", "run_section",
+           "simulate_records"]
