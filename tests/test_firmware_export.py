@@ -103,3 +103,26 @@ def test_plant_feedback_frames_encode_the_state():
     p2.step([1000, 0], 0.01)
     a, w_inf = p2.damping / p2.inertia, p2.kt / p2.damping
     assert p2.w[0] == pytest.approx(w_inf * (1 - np.exp(-a * 0.01)), rel=1e-12)
+
+
+def test_checked_in_optim_data_is_a_fresh_export(tmp_path):
+    out = fw.export_optim_data(tmp_path / "optim_data.hpp")
+    assert out.read_text() == (fw.FIRMWARE_DIR / "generated" / "optim_data.hpp").read_text()
+
+
+def test_optim_data_is_the_teacher_network_on_uniform_inputs():
+    X, T, teacher = fw.optim_data()
+    assert X.shape == (200, 4) and T.shape == (200, 2) and teacher.shape == (58,)
+    assert X.dtype == np.float32 and T.dtype == np.float32
+    assert np.all(np.abs(X) <= 1) and np.all(np.abs(teacher) <= 1.5)
+    # independent forward pass: W1 (8x4), b1, W2 (2x8), b2 in MATLAB column-major order
+    W1 = teacher[:32].reshape(4, 8).T
+    b1 = teacher[32:40]
+    W2 = teacher[40:56].reshape(8, 2).T
+    b2 = teacher[56:]
+    want = (np.tanh(X.astype(float) @ W1.T + b1) @ W2.T + b2).astype(np.float32)
+    np.testing.assert_allclose(T, want, rtol=0, atol=1e-6)
+    X2, _, _ = fw.optim_data(seed=43)
+    assert not np.array_equal(X, X2)
+    with pytest.raises(ValueError, match="n"):
+        fw.optim_data(n=0)

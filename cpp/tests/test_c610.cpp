@@ -112,6 +112,11 @@ TEST_CASE("fast_math: fast_tanh within 1e-6 of tanh over the float range") {
   CHECK(cdam::fast_tanh(big) == doctest::Approx(1.0).epsilon(1e-6));
   CHECK(cdam::fast_tanh(-big) == doctest::Approx(-1.0).epsilon(1e-6));
   CHECK(cdam::fast_tanh(0.0f) == 0.0f);
+  // saturated branch (|x| beyond the clamp, one test on x^2) and NaN propagation
+  CHECK(cdam::fast_tanh(8.0f) == 1.0f);
+  CHECK(cdam::fast_tanh(-8.0f) == -1.0f);
+  CHECK(std::isnan(cdam::fast_tanh(std::numeric_limits<float>::quiet_NaN())));
+  for (float x = 0.01f; x < 9.0f; x *= 1.01f) CHECK(cdam::fast_tanh(-x) == -cdam::fast_tanh(x));
   double worst_l = 0.0;
   for (int k = -40000; k <= 40000; ++k) {
     const float x = static_cast<float>(k) * 5e-4f;

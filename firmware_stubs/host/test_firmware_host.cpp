@@ -10,9 +10,11 @@
 #include <string>
 #include <vector>
 
+#include "cdam/optim/bp_fitness.hpp"
 #include "cdam/slcan.hpp"
 #include "fw/controller.hpp"
 #include "fw/model_runner.hpp"
+#include "fw/optim_run.hpp"
 
 namespace {
 
@@ -122,4 +124,25 @@ TEST_CASE("controller through SLCAN text: the loop image's path") {
   }
   CHECK(frames_out == 1);
   CHECK(out == "t20080000000000000000\r");  // zero reference, zero state: zero current
+}
+
+TEST_CASE("optim run: MseFitness equals the core's MlpFitness on the flash data") {
+  // fw/optim_run.hpp keeps its own fitness because bp_fitness.hpp does not compile for the
+  // target (std::mutex); on the host both exist and must agree exactly (same loop, same order).
+  using Net = fw::optim_run::Net;
+  const Net net;
+  fw::optim_run::MseFitness<Net> mine(net, cdam_optim_data::kX, cdam_optim_data::kT,
+                                      cdam_optim_data::kSamples);
+  cdam::optim::MlpFitness<Net> core(net, cdam_optim_data::kX, cdam_optim_data::kT,
+                                    cdam_optim_data::kSamples);
+  cdam::Rng rng(3);
+  float theta[3 * Net::kParams];
+  for (float& v : theta) v = rng.uniform(-1.0f, 1.0f);
+  float a[3], b[3];
+  mine.batch(theta, 3, a);
+  core.batch(theta, 3, b);
+  for (int k = 0; k < 3; ++k) {
+    CHECK(a[k] == b[k]);
+    CHECK(a[k] > 0.0f);
+  }
 }

@@ -48,6 +48,10 @@ int main() {
   for (;;) {
     char c;
     cdam::slcan::Event ev;
-    if (fw::hal::usart1_getc(&c) && g_reader.push(c, &ev)) handle(ev);
+    if (!fw::hal::usart1_getc(&c)) {
+      fw::hal::usart1_wait();
+      continue;
+    }
+    if (g_reader.push(c, &ev)) handle(ev);
   }
 }

@@ -13,6 +13,7 @@ void Reset_Handler();
 void Default_Handler();
 void HardFault_Handler();
 void SysTick_Handler() __attribute__((weak, alias("Default_Handler")));
+void USART1_IRQHandler() __attribute__((weak, alias("Default_Handler")));
 void fw_on_exit(int code) __attribute__((weak));
 }
 
@@ -21,8 +22,10 @@ constexpr std::uint32_t kStackPaint = 0xC0FFEE11u;
 constexpr std::uint32_t kPaintBytes = 8192;  // painted below the initial stack pointer
 }
 
-// 16 system exceptions; device interrupts are unused (polled USART).
-__attribute__((section(".isr_vector"), used)) void (*const g_vectors[16])() = {
+// 16 system exceptions and the STM32F405's device interrupts up to USART1 (IRQ 37), which the
+// SLCAN receive path uses; the others stay unused (null: never enabled).
+constexpr int kUsart1Irq = 37;
+__attribute__((section(".isr_vector"), used)) void (*const g_vectors[16 + kUsart1Irq + 1])() = {
     reinterpret_cast<void (*)()>(&_estack),
     Reset_Handler,
     Default_Handler,    // NMI
@@ -36,6 +39,12 @@ __attribute__((section(".isr_vector"), used)) void (*const g_vectors[16])() = {
     nullptr,
     Default_Handler,    // PendSV
     SysTick_Handler,
+    // IRQ 0 .. 36 unused, IRQ 37 USART1
+    nullptr, nullptr, nullptr, nullptr, nullptr, nullptr, nullptr, nullptr, nullptr, nullptr,
+    nullptr, nullptr, nullptr, nullptr, nullptr, nullptr, nullptr, nullptr, nullptr, nullptr,
+    nullptr, nullptr, nullptr, nullptr, nullptr, nullptr, nullptr, nullptr, nullptr, nullptr,
+    nullptr, nullptr, nullptr, nullptr, nullptr, nullptr, nullptr,
+    USART1_IRQHandler,
 };
 
 extern "C" std::uint32_t fw_stack_high_water() {

@@ -10,6 +10,9 @@ module:
 - ``build(...)``: CMake cross build (toolchain file firmware_stubs/cmake/arm-none-eabi.cmake),
   text/data/bss of every image, heap guard by ``--wrap`` at link time.
 - ``run_equivalence(...)`` / ``check(...)``: checks (1) and (2) under ``timeout qemu-system-arm``.
+- ``run_kernels(...)``, ``run_optim_target(...)`` / ``run_optim_host(...)``: check (3), the
+  smoothing kernel and a fixed-size IBOA-BP + LM run (data: ``optim_data`` /
+  ``export_optim_data``) on the board and on the host.
 - ``closed_loop_pil(...)`` / ``closed_loop_python(...)``: check (4), processor in the loop.
 
 NARX models: the firmware works in the network's input space (the regressor). The exporter
@@ -36,6 +39,7 @@ __all__ = [
     "FIRMWARE_DIR", "FirmwareModel", "load_firmware_model", "export_header", "theta_fnv1a",
     "toolchain_available", "build", "run_qemu", "run_equivalence", "run_kernels", "check",
     "JointPlant", "closed_loop_python", "closed_loop_pil", "pid_config",
+    "optim_data", "export_optim_data", "run_optim_target", "run_optim_host", "OPTIM_SHAPE",
 ]
 
 def _firmware_dir() -> Path:
@@ -238,7 +242,7 @@ def _sizes(elf: Path) -> dict:
     return {"text": text, "data": data, "bss": bss}
 
 
-IMAGES = ("fw_infer", "fw_check", "fw_loop", "fw_kernels")
+IMAGES = ("fw_infer", "fw_check", "fw_loop", "fw_kernels", "fw_optim", "fw_check_exact")
 
 
 def build(build_dir, model=None, *, jobs: int = 2, timeout: float = 600.0) -> dict:
@@ -247,7 +251,9 @@ def build(build_dir, model=None, *, jobs: int = 2, timeout: float = 600.0) -> di
     Args:
         build_dir: CMake build folder (created).
         model: a model file, a FirmwareModel, or None for the checked-in generated/model.hpp.
-    Returns ``{image: {"text", "data", "bss"}}`` for fw_infer, fw_check, fw_loop, fw_kernels.
+    Returns ``{image: {"text", "data", "bss"}}`` for fw_infer, fw_check, fw_loop, fw_kernels,
+    fw_optim (check 3's IBOA-BP run) and fw_check_exact (fw_check with std::tanh, the
+    benchmark's reference).
     Raises RuntimeError with the compiler output when the build fails (also when something
     uses the heap: the link then fails on ``__wrap_malloc``).
     """
@@ -311,9 +317,11 @@ def run_qemu(elf, cwd, *, timeout: float = 30.0, icount: int | None = 4,
     return r.returncode, kv, r.stdout + r.stderr
 
 
-def run_equivalence(build_dir, model, X_normalised, *, timeout: float = 60.0) -> dict:
+def run_equivalence(build_dir, model, X_normalised, *, timeout: float = 60.0,
+                    image: str = "fw_check") -> dict:
     """Checks (1) and (2): the firmware's normalised outputs for the rows of ``X_normalised``
     (N, I) against the Python model (float64), and instructions per inference.
+    ``image``: "fw_check" (the fast activation) or "fw_check_exact" (std::tanh / std::exp).
 
     Returns max_abs_error, instructions_per_inference (network alone, normalised in/out),
     instructions_per_prediction (with scaling and back-scaling), stack_bytes, vectors.
@@ -326,9 +334,11 @@ def run_equivalence(build_dir, model, X_normalised, *, timeout: float = 60.0) ->
         raise ValueError("X_normalised: contains NaN or Inf")
     with tempfile.TemporaryDirectory(prefix="cdam_fw_") as tmp:
         X.astype("<f4").tofile(Path(tmp) / "fw_in.bin")
-        rc, kv, text = run_qemu(Path(build_dir).resolve() / "fw_check.elf", tmp, timeout=timeout)
+        if image not in ("fw_check", "fw_check_exact"):
+            raise ValueError(f"image: expected 'fw_check' or 'fw_check_exact', got {image!r}")
+        rc, kv, text = run_qemu(Path(build_dir).resolve() / f"{image}.elf", tmp, timeout=timeout)
         if rc != 0:
-            raise RuntimeError(f"fw_check.elf exited with {rc} under QEMU:\n{text[-2000:]}")
+            raise RuntimeError(f"{image}.elf exited with {rc} under QEMU:\n{text[-2000:]}")
         Y = np.fromfile(Path(tmp) / "fw_out.bin", dtype="<f4").reshape(-1, fm.n_outputs)
     if Y.shape[0] != X.shape[0] or int(kv["vectors"]) != X.shape[0]:
         raise RuntimeError(f"firmware answered {Y.shape[0]} of {X.shape[0]} vectors")
@@ -412,6 +422,115 @@ def check(model_path, *, build_dir=None, inputs=None, timeout: float = 60.0) -> 
 
 
 # ---------------------------------------------------------------------------------------------
+# check (3), second half: IBOA-BP + LM on the board against the host's float32 run
+
+OPTIM_SHAPE = (4, 8, 2)   # the network of the on-board run (fw/optim_run.hpp)
+OPTIM_SAMPLES = 200
+OPTIM_DATA_SEED = 42
+
+
+def optim_data(seed: int = OPTIM_DATA_SEED, n: int = OPTIM_SAMPLES):
+    """The training set of the on-board IBOA-BP run: a known 4-8-2 tansig teacher on uniform
+    inputs, from the shared generator (cdam_core.reference.rng.Rng(seed)): first the teacher's
+    58 weights uniform in [-1.5, 1.5], then n x 4 inputs uniform in [-1, 1] (sample by sample).
+    Returns (X (n, 4) float32, T (n, 2) float32, teacher theta (58,) float64); T is the
+    teacher's float64 output rounded to float32."""
+    from cdam_core.reference.mlp import mlp_forward
+    from cdam_core.reference.rng import Rng
+    if int(n) < 1:
+        raise ValueError(f"n: must be >= 1, got {n}")
+    i, h, m = OPTIM_SHAPE
+    rng = Rng(int(seed))
+    teacher = np.array([rng.uniform(-1.5, 1.5) for _ in range(i * h + h + h * m + m)])
+    X = np.array([rng.uniform(-1.0, 1.0) for _ in range(int(n) * i)]).reshape(int(n), i)
+    X = X.astype(np.float32)
+    T = mlp_forward(teacher, X.astype(np.float64), h, m, "tansig").astype(np.float32)
+    return X, T, teacher
+
+
+def export_optim_data(out, seed: int = OPTIM_DATA_SEED, n: int = OPTIM_SAMPLES) -> Path:
+    """Write the header with optim_data(seed, n) as constexpr float arrays (kX: n x 4,
+    kT: n x 2, sample-major), held in flash by the firmware; returns the path."""
+    out = Path(out)
+    if not out.parent.is_dir():
+        raise ValueError(f"out: folder {str(out.parent)!r} does not exist")
+    X, T, _ = optim_data(seed, n)
+    i, h, m = OPTIM_SHAPE
+    text = [
+        "// Generated by firmware_stubs/scripts/make_optim_data.py "
+        "(cdam_core.firmware.export_optim_data) -- do not edit.",
+        f"// {n} samples of a {i}-{h}-{m} tansig teacher (weights uniform in [-1.5, 1.5]) on",
+        f"// inputs uniform in [-1, 1], shared generator seed {seed}; targets rounded to float32.",
+        "#pragma once",
+        "",
+        "namespace cdam_optim_data {",
+        "",
+        f"constexpr int kSamples = {n};",
+        f"constexpr int kInputs = {i};",
+        f"constexpr int kOutputs = {m};",
+        f"constexpr unsigned kDataSeed = {seed}u;",
+        "",
+        "// one sample per row: x (kInputs values), t (kOutputs values)",
+        _c_array("kX", X.ravel()),
+        _c_array("kT", T.ravel()),
+        "}  // namespace cdam_optim_data",
+        "",
+    ]
+    out.write_text("\n".join(text))
+    return out
+
+
+def _read_curve(text: str) -> dict:
+    kv, curve = {}, []
+    for line in text.splitlines():
+        if line.startswith("curve="):
+            curve.append(float(line.split("=", 1)[1]))
+        elif "=" in line:
+            k, v = line.split("=", 1)
+            kv[k.strip()] = v.strip()
+    return {"curve": np.asarray(curve), **kv}
+
+
+def run_optim_target(build_dir, *, timeout: float = 120.0) -> dict:
+    """fw_optim.elf under QEMU: IBOA (20 butterflies) seeding a 4-8-2 network on the 200
+    samples in flash, then LM epochs, heap-free (the link proves it).
+
+    Returns {"curve": IBOA best MSE after init and each iteration, then the LM MSE of each
+    recorded epoch (float64 array), "theta": the trained weights (58 float32), "iterations",
+    "lm_epochs", "evaluations", "status", "stack_bytes", "seconds" (wall time of the QEMU run)}.
+    """
+    import time
+    elf = Path(build_dir).resolve() / "fw_optim.elf"
+    if not elf.is_file():
+        raise FileNotFoundError(f"build_dir: no fw_optim.elf in {build_dir}")
+    with tempfile.TemporaryDirectory(prefix="cdam_fw_") as tmp:
+        t0 = time.perf_counter()
+        rc, _, text = run_qemu(elf, tmp, timeout=timeout, icount=None)
+        secs = time.perf_counter() - t0
+        if rc != 0:
+            raise RuntimeError(f"fw_optim.elf exited with {rc} under QEMU:\n{text[-2000:]}")
+        curve = np.fromfile(Path(tmp) / "fw_optim_curve.bin", dtype="<f8")
+        theta = np.fromfile(Path(tmp) / "fw_optim_theta.bin", dtype="<f4")
+    res = _read_curve(text)
+    res["curve"] = curve
+    res["theta"] = theta
+    res["seconds"] = secs
+    return res
+
+
+def run_optim_host(host_build_dir, *, timeout: float = 120.0) -> dict:
+    """The same run compiled for the host in float32 (fw_optim_host of the host build of
+    firmware_stubs); returns curve, iterations, lm_epochs, evaluations and status."""
+    exe = Path(host_build_dir).resolve() / "fw_optim_host"
+    if not exe.is_file():
+        raise FileNotFoundError(f"host_build_dir: no fw_optim_host in {host_build_dir}")
+    r = _run([str(exe)], timeout=timeout)
+    if r.returncode != 0:
+        raise RuntimeError(f"fw_optim_host exited with {r.returncode}:\n{r.stderr[-2000:]}")
+    return _read_curve(r.stdout)
+
+
+# ---------------------------------------------------------------------------------------------
 # check (4): processor in the loop over SLCAN
 
 REFERENCE_ID, DIAGNOSTIC_ID = 0x300, 0x3F0
@@ -467,8 +586,8 @@ class JointPlant:
 
 def default_reference(t: float) -> tuple[float, float]:
     """Joint references (rad): 0.5 rad from 0.01 s and -0.3 rad from 0.05 s (steps; the PIL
-    loop sends a 0x300 frame only when the reference changes, because QEMU's emulated USART
-    takes about 1 ms per received byte)."""
+    loop sends a 0x300 frame only when the reference changes, which saves 22 bytes a cycle on
+    the emulated UART)."""
     return (0.5 if t >= 0.01 else 0.0), (-0.3 if t >= 0.05 else 0.0)
 
 
@@ -529,12 +648,25 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
+def _set_nodelay(bus) -> None:
+    """TCP_NODELAY on python-can's slcan socket (pyserial's ``socket://`` keeps it in
+    ``_socket``); without it every frame written waits for the previous one's delayed ACK."""
+    import socket
+    sock = getattr(getattr(bus, "serialPortOrig", None), "_socket", None)
+    if sock is not None:
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+
+
 def closed_loop_pil(build_dir, duration: float = 2.0, reference=default_reference,
                     plant: JointPlant | None = None, *, timeout: float | None = None) -> dict:
     """Check (4): fw_loop.elf under QEMU, the plant in Python, python-can over SLCAN on the
     emulated USART1 (``-serial tcp:127.0.0.1:PORT,server=on,wait=on``).
 
-    ``timeout`` (seconds of wall time for QEMU) defaults to 60 + 0.25 s per cycle.
+    ``timeout`` (seconds of wall time for QEMU) defaults to 60 + 0.1 s per cycle.
+    Both ends of the TCP link run with TCP_NODELAY (QEMU's ``nodelay=on`` and the client
+    socket): with Nagle's algorithm each of the many small writes of a cycle waited for a
+    delayed ACK, about 40 ms a write, which made a cycle take about 0.1 s of wall time instead
+    of about 5 ms.
     Lock-step: each period sends the reference (0x300) and both feedback frames, waits for the
     0x200 command and the 0x3F0 diagnostic, then advances the plant one period. Returns the
     same arrays as closed_loop_python plus frames_sent, frames_received, cycles (the
@@ -547,8 +679,8 @@ def closed_loop_pil(build_dir, duration: float = 2.0, reference=default_referenc
     if n < 1:
         raise ValueError(f"duration: must be at least one period, got {duration}")
     plant = plant or JointPlant()
-    if timeout is None:  # QEMU's USART takes about 1 ms per received byte: ~0.1 s per cycle
-        timeout = 60.0 + 0.25 * n
+    if timeout is None:  # about 5 ms of wall time per cycle with TCP_NODELAY
+        timeout = 60.0 + 0.1 * n
     port = _free_port()
     elf = Path(build_dir).resolve() / "fw_loop.elf"
     if not elf.is_file():
@@ -556,7 +688,7 @@ def closed_loop_pil(build_dir, duration: float = 2.0, reference=default_referenc
     proc = subprocess.Popen(
         ["timeout", "--kill-after=5", str(float(timeout)), QEMU, "-M", "netduinoplus2",
          "-display", "none", "-monitor", "none",
-         "-serial", f"tcp:127.0.0.1:{port},server=on,wait=on", "-kernel", str(elf)],
+         "-serial", f"tcp:127.0.0.1:{port},server=on,wait=on,nodelay=on", "-kernel", str(elf)],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     out = {k: [] for k in ("t", "r", "q", "u", "y0")}
     sent = received = 0
@@ -575,6 +707,7 @@ def closed_loop_pil(build_dir, duration: float = 2.0, reference=default_referenc
                 if time.monotonic() > deadline or proc.poll() is not None:
                     raise
                 time.sleep(0.05)
+        _set_nodelay(bus)
         # The emulated USART drops bytes that arrive before the firmware enables it, so the
         # open sequence python-can sent may be lost: wait for an answer to "V", then open.
         while bus.get_version(0.5)[0] is None:

@@ -13,9 +13,14 @@ void systick_periodic(std::uint32_t ticks);
 std::uint32_t systick_value();
 std::uint32_t millis();
 
-// USART1 (PA9 TX, PA10 RX, AF7), 8N1, polled.
+// USART1 (PA9 TX, PA10 RX, AF7), 8N1. Receive: the RXNE interrupt fills a 128-byte ring;
+// transmit is polled.
 void usart1_init(std::uint32_t baud);
 bool usart1_getc(char* c);  // false when no byte is waiting
+// Sleeps (WFI) until an interrupt when no byte is waiting. Under QEMU this matters: a core
+// busy-polling the USART keeps the I/O thread from delivering the next byte (about 1 ms a byte).
+void usart1_wait();
+std::uint32_t usart1_overruns();  // bytes dropped because the ring was full
 void usart1_putc(char c);
 void usart1_write(const char* s, unsigned n);
 

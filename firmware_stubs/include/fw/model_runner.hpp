@@ -14,7 +14,14 @@ namespace fw {
 constexpr int kIn = cdam_model::kInputs;
 constexpr int kHid = cdam_model::kHidden;
 constexpr int kOut = cdam_model::kOutputs;
-using Net = cdam::Mlp<float, kIn, kHid, kOut, cdam::FastActivation>;
+// CDAM_FW_EXACT_ACTIVATION (the fw_check_exact reference image of the benchmark): std::tanh /
+// std::exp from newlib instead of the fast rational activation.
+#ifdef CDAM_FW_EXACT_ACTIVATION
+using Activation = cdam::ExactActivation;
+#else
+using Activation = cdam::FastActivation;
+#endif
+using Net = cdam::Mlp<float, kIn, kHid, kOut, Activation>;
 static_assert(Net::kParams == cdam_model::kParams, "generated model: parameter count mismatch");
 
 // Normalised in, normalised out: the network alone.

@@ -1,0 +1,183 @@
+// Levenberg-Marquardt training of a fixed-size BP network, heap-free (the target's twin of
+// levenberg_marquardt.hpp's train_lm, without a validation set).
+//
+// Net is a cdam::Mlp<Scalar, I, H, O, ActFn> with compile-time sizes; every buffer (J'J 58 x 58
+// for 4-8-2, the Cholesky factor, J'e, one sample's m x D Jacobian) is a fixed-size member, so an
+// LmFixed object (static on the target: about 2 D^2 Scalars) never allocates.
+//
+// Semantics are train_lm's (MATLAB trainlm), per epoch:
+//   evaluate: sse and mse = sse / (N m) (summed in double), J'e and J'J accumulated per sample
+//             from Mlp::forward and Mlp::jacobian (e = t - y), lower triangle of J'J only;
+//   record mse and mu; stop on goal (mse <= goal), epochs, min_grad (||J'e|| <= min_grad) or
+//   mu_max (mu >= mu_max), in that order;
+//   while mu <= mu_max: Cholesky of J'J + mu I (a non-positive pivot counts as a failure);
+//             d solves it against J'e, trial = theta + d; if mse(trial) < mse accept it,
+//             mu = max(mu mu_dec, 1e-20) and end the epoch; else (or on failure) mu *= mu_inc.
+// The Cholesky is plain loops (column by column, left-looking, sums in index order) rather than
+// Eigen::LLT: for a fixed 58 x 58 matrix Eigen's blocked factorisation goes through
+// triangular_solve_matrix with level-3 blocking, whose workspace falls back to malloc, so LLT
+// fails the firmware's heap guard at link time. Plain loops also give one summation order on
+// every compiler, which lets the target's float run be compared with the host's.
+#pragma once
+#include <Eigen/Core>
+#include <cmath>
+
+#include "mlp.hpp"
+#include "status.hpp"
+
+namespace cdam {
+
+// Same meaning and order as LmStop (levenberg_marquardt.hpp) for the stops that apply here.
+enum class LmFixedStop { Goal = 0, Epochs, MinGrad, MuMax };
+
+struct LmFixedOptions {
+  int epochs = 100;
+  double goal = 0.0;
+  double mu = 1e-3;
+  double mu_dec = 0.1;
+  double mu_inc = 10.0;
+  double mu_max = 1e10;
+  double min_grad = 1e-7;
+
+  bool valid() const {
+    return epochs >= 0 && goal >= 0 && mu > 0 && mu_dec > 0 && mu_dec < 1 && mu_inc > 1 &&
+           mu_max >= mu && min_grad >= 0 && std::isfinite(mu_max);
+  }
+};
+
+template <typename Net>
+class LmFixed {
+ public:
+  using Scalar = typename Net::Scalar;
+  static constexpr int kD = Net::kParams, kI = Net::kInputs, kH = Net::kHidden,
+                       kM = Net::kOutputs;
+  static_assert(kD != Eigen::Dynamic, "LmFixed: fixed sizes only (host: train_lm)");
+  using Square = Eigen::Matrix<Scalar, kD, kD>;
+  using Vec = Eigen::Matrix<Scalar, kD, 1>;
+
+  explicit LmFixed(const Net& net = Net()) : net_(net) {}
+
+  // Sum of squared errors of theta on n samples (X: i x n, T: m x n, one sample per column),
+  // in double. With `normal`, also J'e (jte()) and the lower triangle of J'J (jtj()).
+  double evaluate(const Scalar* theta, const Scalar* X, const Scalar* T, Index n, bool normal) {
+    double sse = 0.0;
+    if (normal) {
+      jte_.setZero();
+      jtj_.setZero();
+    }
+    for (Index s = 0; s < n; ++s) {
+      const Scalar* x = X + s * kI;
+      const Scalar* t = T + s * kM;
+      net_.forward(theta, x, a_.data(), y_.data());
+      for (int k = 0; k < kM; ++k) {
+        const Scalar e = t[k] - y_[k];
+        e_[k] = e;
+        sse += static_cast<double>(e) * static_cast<double>(e);
+      }
+      if (!normal) continue;
+      net_.jacobian(theta, x, a_.data(), J_.data());
+      for (int c = 0; c < kD; ++c) {
+        Scalar g = 0;
+        for (int k = 0; k < kM; ++k) g += J_(k, c) * e_[k];
+        jte_[c] += g;
+        for (int r = c; r < kD; ++r) {
+          Scalar v = 0;
+          for (int k = 0; k < kM; ++k) v += J_(k, r) * J_(k, c);
+          jtj_(r, c) += v;
+        }
+      }
+    }
+    return sse;
+  }
+
+  // Trains theta (kD values, in place) on n samples. mse_hist / mu_hist (may be null) receive
+  // one value per recorded epoch, at most opt.epochs + 1; *recorded is their count.
+  Status train(Scalar* theta, const Scalar* X, const Scalar* T, Index n,
+               const LmFixedOptions& opt, double* mse_hist, double* mu_hist, int* recorded,
+               LmFixedStop* stop) {
+    if (recorded) *recorded = 0;
+    if (n < 1) return Status::Empty;
+    if (!opt.valid()) return Status::InvalidArgument;
+    Eigen::Map<Vec> th(theta);
+    const double nm = static_cast<double>(n) * kM;
+    double mse = evaluate(theta, X, T, n, false) / nm;
+    double mu = opt.mu;
+    LmFixedStop why = LmFixedStop::Epochs;
+    for (int epoch = 0;; ++epoch) {
+      evaluate(theta, X, T, n, true);
+      double g2 = 0.0;
+      for (int c = 0; c < kD; ++c) g2 += static_cast<double>(jte_[c]) * static_cast<double>(jte_[c]);
+      if (mse_hist) mse_hist[epoch] = mse;
+      if (mu_hist) mu_hist[epoch] = mu;
+      if (recorded) *recorded = epoch + 1;
+      if (mse <= opt.goal) { why = LmFixedStop::Goal; break; }
+      if (epoch == opt.epochs) { why = LmFixedStop::Epochs; break; }
+      if (std::sqrt(g2) <= opt.min_grad) { why = LmFixedStop::MinGrad; break; }
+      if (mu >= opt.mu_max) { why = LmFixedStop::MuMax; break; }
+      while (mu <= opt.mu_max) {
+        lhs_ = jtj_;
+        for (int c = 0; c < kD; ++c) lhs_(c, c) += static_cast<Scalar>(mu);
+        if (cholesky_inplace(lhs_)) {
+          step_ = jte_;
+          cholesky_solve(lhs_, step_);
+          trial_ = th + step_;
+          const double mse2 = evaluate(trial_.data(), X, T, n, false) / nm;
+          if (mse2 < mse) {
+            th = trial_;
+            mse = mse2;
+            mu = mu * opt.mu_dec > 1e-20 ? mu * opt.mu_dec : 1e-20;
+            break;
+          }
+        }
+        mu *= opt.mu_inc;
+      }
+    }
+    if (stop) *stop = why;
+    return Status::Ok;
+  }
+
+  // Cholesky A = L L' in place on the lower triangle of A (the upper triangle is not read).
+  // False when a pivot is not positive (or not finite).
+  static bool cholesky_inplace(Square& A) {
+    for (int j = 0; j < kD; ++j) {
+      Scalar d = A(j, j);
+      for (int k = 0; k < j; ++k) d -= A(j, k) * A(j, k);
+      if (!(d > Scalar(0)) || !std::isfinite(d)) return false;
+      const Scalar ljj = std::sqrt(d);
+      A(j, j) = ljj;
+      for (int i = j + 1; i < kD; ++i) {
+        Scalar v = A(i, j);
+        for (int k = 0; k < j; ++k) v -= A(i, k) * A(j, k);
+        A(i, j) = v / ljj;
+      }
+    }
+    return true;
+  }
+
+  // Solves L L' x = b in place (L from cholesky_inplace).
+  static void cholesky_solve(const Square& L, Vec& b) {
+    for (int i = 0; i < kD; ++i) {
+      Scalar v = b[i];
+      for (int k = 0; k < i; ++k) v -= L(i, k) * b[k];
+      b[i] = v / L(i, i);
+    }
+    for (int i = kD - 1; i >= 0; --i) {
+      Scalar v = b[i];
+      for (int k = i + 1; k < kD; ++k) v -= L(k, i) * b[k];
+      b[i] = v / L(i, i);
+    }
+  }
+
+  const Vec& jte() const { return jte_; }
+  const Square& jtj() const { return jtj_; }  // lower triangle valid
+
+ private:
+  Net net_;
+  Square jtj_, lhs_;
+  Vec jte_, step_, trial_;
+  Eigen::Matrix<Scalar, kM, kD> J_;
+  Eigen::Matrix<Scalar, kH, 1> a_;
+  Eigen::Matrix<Scalar, kM, 1> y_, e_;
+};
+
+}  // namespace cdam
