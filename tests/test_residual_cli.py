@@ -2,6 +2,7 @@
 import json
 
 import numpy as np
+import pytest
 from test_residual_synth_data import rigid_axis_record
 
 from cdam_core.cli.main import main
@@ -35,9 +36,29 @@ def test_cli_errors(tmp_path, capsys):
     rec = rigid_axis_record(seed=2, duration=2.0)
     _csv(tmp_path / "r.csv", rec)
     assert main(["residual", str(tmp_path / "r.csv"), "--model", "quadrotor"]) == 2
-    assert "not yet available" in capsys.readouterr().err
+    assert "column 'T'" in capsys.readouterr().err   # the flight model's columns are missing
+    assert main(["residual", str(tmp_path / "r.csv"), "--model", "rigid_axis", "--map",
+                 "tau=force,q=pos", "--fixed", "M=heavy"]) == 2
+    assert "--fixed" in capsys.readouterr().err
     assert main(["residual", str(tmp_path / "r.csv"), "--model", "rigid_axis",
                  "--map", "tau=nope,q=pos"]) == 2
     assert "nope" in capsys.readouterr().err
     assert main(["residual", str(tmp_path / "r.csv"), "--model", "rigid_axis",
                  "--map", "tau"]) == 2
+
+
+def test_cli_on_a_simulated_flight(tmp_path):
+    """`cdam simulate` output -> `cdam residual --model aerial_manipulator`: the sidecar's
+    declared arm_coupling is part of the declared model, the hidden thrust loss is found."""
+    from cdam_core.sim import simulate_flight, write_flight
+    ds = simulate_flight("both", duration=6.0, seed=3, effects=["thrust_loss:c=0.005"],
+                         declare=["arm_coupling"])
+    write_flight(tmp_path / "f.csv", ds)
+    rc = main(["residual", str(tmp_path / "f.csv"), "--model", "aerial_manipulator", "--fixed",
+               "m=1.82", "--no-free-run", "--json", str(tmp_path / "o.json")])
+    assert rc == 0
+    js = json.loads((tmp_path / "o.json").read_text())
+    assert js["declared_effects"] == ["arm_coupling"]
+    assert [(f["effect"], f["channel"]) for f in js["findings"]] == [("thrust_loss", "Z")]
+    assert js["findings"][0]["parameters"]["c"] == pytest.approx(0.005, rel=0.2)
+    assert set(js["declared_error"]) >= {"X", "Z", "tau_theta", "tau_m1", "tau_l2"}

@@ -51,9 +51,24 @@ def test_flexible_free_run_tracks_generator():
     assert np.sqrt(np.mean((sim["q"] - rec["q"]) ** 2)) < 0.05 * np.std(rec["q"])
 
 
-def test_models_later_and_unknown():
-    with pytest.raises(ValueError, match="not yet available"):
-        get_model("quadrotor")
+def test_quadrotor_exact_on_analytic_signals():
+    # level flight with closed-form Z, X, psi: T and the moments built from PAPER.md (1)
+    t = np.arange(0, 8, 1e-3)
+    w = 2 * np.pi * 0.4
+    Z, Zd, Zdd = 1 + 0.2 * np.sin(w * t), 0.2 * w * np.cos(w * t), -0.2 * w ** 2 * np.sin(w * t)
+    psi, psid, psidd = 0.3 * np.sin(w * t), 0.3 * w * np.cos(w * t), -0.3 * w ** 2 * np.sin(w * t)
+    m, Kz, Jz, Kpsi = 1.8, 0.3, 0.024, 0.005
+    zero = np.zeros_like(t)
+    sig = {"T": m * (Zdd + 9.81) + Kz * Zd, "tau_phi": zero, "tau_theta": zero,
+           "tau_psi": Jz * psidd + Kpsi * psid, "phi": zero, "theta": zero, "psi": psi,
+           "X": zero, "Y": zero, "Z": Z}
+    q = get_model("quadrotor")
+    f = fit(q, q.prepare(t, sig), (), trim=1000)
+    for k, v in {"m": m, "Kz": Kz, "Jz": Jz, "Kpsi": Kpsi}.items():
+        assert f.theta[k] == pytest.approx(v, rel=2e-3), k
+
+
+def test_models_unknown():
     with pytest.raises(ValueError, match="unknown model"):
         get_model("nope")
     with pytest.raises(ValueError, match="fixed"):

@@ -27,7 +27,7 @@ def run(args) -> int:
     from ..residual import analyse, to_json, write_report
     from ..residual.models import get_model
 
-    model = get_model(args.model)  # fails early, clearly, for models that are not available
+    model = get_model(args.model)  # fails early, clearly, for an unknown model
     mapping = dict(model.defaults)
     given = parse_map(args.map)
     for k in given:
@@ -45,10 +45,22 @@ def run(args) -> int:
     signals = {name: ds.column(col) for name, col in mapping.items()}
     used = set(mapping.values())
     extra = {c: ds.column(c) for c in inputs if c not in used}
+    fixed = {}
+    for k, v in parse_map(args.fixed).items():
+        try:
+            fixed[k] = float(v)
+        except ValueError:
+            raise ValueError(f"--fixed: {k}: not a number: {v!r}") from None
+    # effects the sidecar's model declares are part of the declared model
+    from ..residual.effects import LIBRARY
+    meta = getattr(ds, "meta", None) or {}
+    declared = [e for e in ((meta.get("model") or {}).get("effects") or []) if e in LIBRARY]
     sel = analyse(args.model, ds.t, signals, extra=extra or None, cutoff_hz=args.cutoff,
-                  alpha=args.alpha, free_run=not args.no_free_run)
+                  alpha=args.alpha, free_run=not args.no_free_run, fixed=fixed or None,
+                  declared=declared)
     js = to_json(sel)
     js["source"] = str(args.data)
+    js["declared_effects"] = declared
     if args.json:
         Path(args.json).write_text(json.dumps(js, indent=2))
     if args.report:
@@ -78,8 +90,12 @@ def register(subparsers) -> None:
     p.add_argument("--map", help="model signal names to columns, e.g. tau=force,q=qm")
     p.add_argument("--json", help="write the JSON result here")
     p.add_argument("--report", help="write a Markdown report with PNG figures into this folder")
-    p.add_argument("--cutoff", type=float, default=100.0,
-                   help="derivative filter cutoff in Hz (default 100)")
+    p.add_argument("--cutoff", type=float, default=None,
+                   help="derivative filter cutoff in Hz (default: 100 for rigid_axis and "
+                        "flexible_joint; 2 for the flight models' body channels, their joint "
+                        "channels use 20)")
+    p.add_argument("--fixed", help="known parameters, e.g. m=1.82 (the weighed mass, which "
+                                   "payload_mass needs)")
     p.add_argument("--alpha", type=float, default=0.01, help="significance level (default 0.01)")
     p.add_argument("--no-free-run", action="store_true", help="skip the free-run simulation")
     p.set_defaults(func=run)

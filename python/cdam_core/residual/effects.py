@@ -142,20 +142,22 @@ class Backlash(Effect):
     search = ("width", 0.0, None)
 
     def applies_to(self, model) -> bool:
-        return model.name == "flexible_joint" and self.channel == "tau_l"
+        return self.channel in model.cables
 
     def search_bounds(self, s, model):
-        return 0.0, float(np.max(np.abs(s["defl"])))
+        return 0.0, float(np.max(np.abs(s[model.cables[self.channel][1]])))
 
     def transform_state(self, s, model):
+        key = model.cables[self.channel][1]
         h = 0.5 * self.width
-        d = s["defl"]
+        d = s[key]
         s = dict(s)
-        s["defl"] = np.sign(d) * np.maximum(np.abs(d) - h, 0.0)
+        s[key] = np.sign(d) * np.maximum(np.abs(d) - h, 0.0)
         return s
 
     def regressor_signal(self, s, model):
-        return np.asarray(s["defl"] - self.transform_state(s, model)["defl"], dtype=float)
+        key = model.cables[self.channel][1]
+        return np.asarray(s[key] - self.transform_state(s, model)[key], dtype=float)
 
 
 @dataclass(frozen=True)
@@ -165,11 +167,12 @@ class HardeningStiffness(Effect):
     name = "hardening_stiffness"
 
     def applies_to(self, model) -> bool:
-        return model.name == "flexible_joint" and self.channel == "tau_l"
+        return self.channel in model.cables
 
     def regressors(self, s, model):
-        d3 = np.asarray(s["defl"], dtype=float) ** 3
-        return {"tau_m": {_p(self, "K3"): d3}, "tau_l": {_p(self, "K3"): -d3}}
+        motor, defl = model.cables[self.channel][:2]
+        d3 = np.asarray(s[defl], dtype=float) ** 3
+        return {motor: {_p(self, "K3"): d3}, self.channel: {_p(self, "K3"): -d3}}
 
 
 @dataclass(frozen=True)
@@ -189,8 +192,13 @@ class ActuatorDelay(Effect):
         # cutoff (5 ms at 100 Hz). Shorter shifts are within the phase errors of the zero-order
         # hold (half a sample), the filter and unmodelled fast dynamics (on EMPS with pulses a
         # 1.3 ms "delay" would absorb the 24 Hz flexibility), so they are not resolved.
+        # With parallel filtering (flight models) both sides of the equation share the
+        # filter's phase, so the floor is two samples.
         filt = s.get("filter")
-        lo = max(float(s["dt"]), 0.5 / filt.cutoff_hz if filt is not None else 0.0)
+        if getattr(model, "parallel_filter", False):
+            lo = 2.0 * float(s["dt"])
+        else:
+            lo = max(float(s["dt"]), 0.5 / filt.cutoff_hz if filt is not None else 0.0)
         return lo, max(float(self.max_delay), lo)
 
     def transform_inputs(self, s, model):
@@ -207,22 +215,27 @@ class ActuatorDelay(Effect):
 
 @dataclass(frozen=True)
 class PayloadMass(Effect):
-    """An extra point mass at the link tip (link length ``length``): adds m l^2 q'' + m g l sin q.
+    """An extra point mass the declared model does not know.
 
-    Only meaningful when the link inertia and gravity term are known (``fixed``); otherwise the
-    estimated I and G absorb it.
+    ``flexible_joint`` (channel ``tau_l``): at the link tip (length ``length``), adds
+    m l^2 q'' + m g l sin q; needs the link inertia and gravity term fixed (``I``, ``G``).
+    Flight models (channel ``Z``): adds mass (Z'' + g) to the vertical force equation; needs
+    the vehicle mass ``m`` fixed (weighed), otherwise the estimated m absorbs it.
     """
 
     length: float = 0.3
     name = "payload_mass"
 
     def applies_to(self, model) -> bool:
-        return (model.name == "flexible_joint" and self.channel == "tau_l"
-                and {"I", "G"} <= set(model.fixed))
+        if model.name == "flexible_joint":
+            return self.channel == "tau_l" and {"I", "G"} <= set(model.fixed)
+        return model.name in _QUAD and self.channel == "Z" and "m" in model.fixed
 
     def regressors(self, s, model):
-        col = self.length ** 2 * s["q_dd"] + G0 * self.length * np.sin(s["q"])
-        return {"tau_l": {_p(self, "m"): col}}
+        if model.name == "flexible_joint":
+            col = self.length ** 2 * s["q_dd"] + G0 * self.length * np.sin(s["q"])
+            return {"tau_l": {_p(self, "m"): col}}
+        return {"Z": {_p(self, "mass"): s["Z_dd"] + G0}}
 
 
 @dataclass(frozen=True)
@@ -251,24 +264,33 @@ class ExternalForce(Effect):
 _QUAD = ("quadrotor", "aerial_manipulator")
 
 
+def _vertical_thrust(s):
+    from .flight_models import thrust_direction
+    return s["T"] * thrust_direction(s)[2]
+
+
 @dataclass(frozen=True)
 class GroundEffect(Effect):
-    """Thrust gain near the ground (Cheeseman-Bennett): extra thrust T (R / 4Z)^2 on Z."""
+    """Thrust gain near the ground (Cheeseman-Bennett, first order): T (1 + k (R / 4Z)^2).
 
-    rotor_radius: float = 0.12
+    Column on ``Z``: -T cphi ctheta (R / 4Z)^2 with parameter ``k`` (1 for Cheeseman-Bennett);
+    ``rotor_radius`` R defaults to the X450's 10 inch propellers (0.127 m).
+    """
+
+    rotor_radius: float = 0.127
     name = "ground_effect"
 
     def applies_to(self, model) -> bool:
         return model.name in _QUAD and self.channel == "Z"
 
     def regressors(self, s, model):
-        z = np.maximum(np.asarray(s["Z"], dtype=float), 1e-3)
-        return {"Z": {_p(self, "k"): -s["T"] * (self.rotor_radius / (4 * z)) ** 2}}
+        z = np.maximum(np.asarray(s["Z"], dtype=float), 0.05)
+        return {"Z": {_p(self, "k"): -_vertical_thrust(s) * (self.rotor_radius / (4 * z)) ** 2}}
 
 
 @dataclass(frozen=True)
 class ThrustLoss(Effect):
-    """Thrust coefficient sagging with the battery: thrust T (1 - c t)."""
+    """Thrust coefficient sagging with the battery: T (1 - c t), t from the record's time 0."""
 
     name = "thrust_loss"
 
@@ -276,20 +298,79 @@ class ThrustLoss(Effect):
         return model.name in _QUAD and self.channel == "Z"
 
     def regressors(self, s, model):
-        return {"Z": {_p(self, "c"): s["T"] * (s["t"] - s["t"][0])}}
+        return {"Z": {_p(self, "c"): _vertical_thrust(s) * s["t"]}}
+
+
+def _d(x, dt):
+    return np.gradient(np.asarray(x, dtype=float), dt)
 
 
 @dataclass(frozen=True)
 class ArmCoupling(Effect):
-    """Reaction of the swinging arm on the body (missing from model (8)): joint accelerations."""
+    """The swinging arm's reaction on the body, which model (8) lacks (aerial_manipulator).
+
+    Arm first moment in the body frame s(q) = -c0 e_z + c1 e(q1) + c2 e(q1 + q2) with
+    e(a) = (-sin a, 0, -cos a) (c0 = arm mass x joint depth, c1 = m1 lc1 + m2 l1,
+    c2 = m2 lc2). Force channels X, Y, Z: the world second derivative of R s(q) (exact: the
+    vehicle's momentum is m p' + (R s)'). Moment channels: s x (body specific force) plus the
+    arm's relative angular momentum terms (pitch: d/dt of the cos q1, cos(q1 + q2), cos q2
+    inertia couplings with theta' and q', and q1'', (q1 + q2)''; roll: cos terms times phi').
+    Columns need whole records (derivatives by ``numpy.gradient``): free-run evaluates them
+    from the measured signals.
+    """
 
     name = "arm_coupling"
 
     def applies_to(self, model) -> bool:
-        return model.name in _QUAD and self.channel in ("X", "Y", "Z")
+        return model.name == "aerial_manipulator" and self.channel in (
+            "X", "Y", "Z", "tau_phi", "tau_theta")
 
     def regressors(self, s, model):
-        return {self.channel: {_p(self, "k1"): s["q1_dd"], _p(self, "k2"): s["q2_dd"]}}
+        if np.ndim(s["q1"]) == 0:
+            pre = s.get("precomputed", {}).get(self.key)
+            if pre is None:
+                raise ValueError("arm_coupling: needs the whole record (precomputed columns)")
+            k = s["k"]
+            return {self.channel: {n: float(c[k]) for n, c in pre.items()}}
+        cache = s.get("_arm_cache")   # positions are never changed by effects: cache per record
+        if cache is None:
+            return {self.channel: self.columns(s)}
+        if self.key not in cache:
+            cache[self.key] = self.columns(s)
+        return {self.channel: cache[self.key]}
+
+    def columns(self, s) -> dict:
+        dt = float(s["dt"])
+        f, th, ps = s["phi"], s["theta"], s["psi"]
+        cf, sf, ct, st, cp, sp = np.cos(f), np.sin(f), np.cos(th), np.sin(th), np.cos(ps), np.sin(ps)
+        bx = np.array([ct * cp, ct * sp, -st])                                    # R[:, 0]
+        by = np.array([cp * st * sf - sp * cf, sp * st * sf + cp * cf, ct * sf])  # R[:, 1]
+        bz = np.array([cf * st * cp + sf * sp, cf * st * sp - sf * cp, cf * ct])  # R[:, 2]
+        q1, q12 = s["q1"], s["q1"] + s["q2"]
+        ch = self.channel
+        if ch in ("X", "Y", "Z"):
+            i = "XYZ".index(ch)
+            w0 = -bz[i]
+            w1 = -np.sin(q1) * bx[i] - np.cos(q1) * bz[i]
+            w2 = -np.sin(q12) * bx[i] - np.cos(q12) * bz[i]
+            return {_p(self, n): _d(_d(w, dt), dt) for n, w in (("c0", w0), ("c1", w1), ("c2", w2))}
+        acc = np.array([s["X_dd"], s["Y_dd"], s["Z_dd"] + G0])
+        ax, ay, az = (np.einsum("ij,ij->j", b, acc) for b in (bx, by, bz))
+        q1d, q2d, q12d = s["q1_d"], s["q2_d"], s["q1_d"] + s["q2_d"]
+        if ch == "tau_theta":
+            td = s["theta_d"]
+            return {_p(self, "c0"): -ax,
+                    _p(self, "c1"): -np.cos(q1) * ax + np.sin(q1) * az,
+                    _p(self, "c2"): -np.cos(q12) * ax + np.sin(q12) * az,
+                    _p(self, "dc1"): _d(np.cos(q1) * (2 * td + q1d), dt),
+                    _p(self, "dc2"): _d(np.cos(q12) * (2 * td + q12d), dt),
+                    _p(self, "p2"): _d(np.cos(s["q2"]) * (2 * td + 2 * q1d + q2d), dt),
+                    _p(self, "I1"): s["q1_dd"], _p(self, "I12"): s["q1_dd"] + s["q2_dd"]}
+        pd = s["phi_d"]
+        return {_p(self, "c0"): ay, _p(self, "c1"): np.cos(q1) * ay,
+                _p(self, "c2"): np.cos(q12) * ay,
+                _p(self, "dc1"): _d(np.cos(q1) * pd, dt), _p(self, "dc2"): _d(np.cos(q12) * pd, dt),
+                _p(self, "p2"): _d(np.cos(s["q2"]) * pd, dt)}
 
 
 LIBRARY = {c.name: c for c in (CoulombFriction, AsymmetricFriction, Backlash, HardeningStiffness,

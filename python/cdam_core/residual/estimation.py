@@ -33,7 +33,36 @@ def design(model, sig: dict, effects=()) -> tuple[dict, dict]:
             if eq not in eqs:
                 raise ValueError(f"effects: {e.key} adds to unknown equation {eq!r}")
             eqs[eq][1].update(cols)
+    if getattr(model, "parallel_filter", False) and "filter" in s:
+        n = np.asarray(s["t"]).size
+        cache = sig.setdefault("_lowpass_cache", {})
+        out, sigs = {}, {}
+        for eq, (y, cols) in eqs.items():
+            f = model.equation_filter(eq, s)
+            names = ["__y"] + list(cols)
+            arrs = [np.broadcast_to(np.asarray(c, dtype=float), (n,))
+                    for c in [y] + list(cols.values())]
+            keys = [(eq, nm, f.cutoff_hz, hash(a.tobytes())) for nm, a in zip(names, arrs)]
+            todo = [i for i, key in enumerate(keys) if key not in cache]
+            if todo:
+                filtered = f.lowpass(np.column_stack([arrs[i] for i in todo]), s["dt"])
+                if len(cache) > 4000:
+                    cache.clear()
+                for j, i in enumerate(todo):
+                    cache[keys[i]] = filtered[:, j]
+            got = [cache[key] for key in keys]
+            out[eq] = (got[0], dict(zip(names[1:], got[1:])))
+            sigs[eq] = tuple(keys)
+        eqs = out
+        s["_signatures"] = sigs
     return s, eqs
+
+
+def _reference(model, eq, s, theta, y, n, keep):
+    ref = model.reference(eq, s, theta)
+    if ref is None:   # the equation's own (filtered) left side
+        return np.broadcast_to(np.asarray(y, dtype=float), (n,))[keep]
+    return np.broadcast_to(np.asarray(ref, dtype=float), (n,))[keep]
 
 
 @dataclass
@@ -49,6 +78,7 @@ class Fit:
     signals: dict               # transformed signals
     keep: slice
     cond: float
+    columns: dict = field(default_factory=dict)   # equation -> estimated parameters in it
 
     @property
     def sse(self) -> float:
@@ -73,8 +103,38 @@ class Fit:
         return out
 
 
-def fit(model, sig: dict, effects=(), trim: int = 50) -> Fit:
-    """Estimate the parameters of ``model`` with ``effects`` by linear least squares."""
+def _components(eqs: dict, est: list) -> list:
+    """Groups of equations linked by shared estimated parameters (independent LS blocks)."""
+    parent = {eq: eq for eq in eqs}
+
+    def root(e):
+        while parent[e] != e:
+            parent[e] = parent[parent[e]]
+            e = parent[e]
+        return e
+    owner = {}
+    estset = set(est)
+    for eq, (_, cols) in eqs.items():
+        for p in cols:
+            if p in estset:
+                if p in owner:
+                    parent[root(eq)] = root(owner[p])
+                else:
+                    owner[p] = eq
+    groups: dict = {}
+    for eq in eqs:
+        groups.setdefault(root(eq), []).append(eq)
+    return list(groups.values())
+
+
+def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None) -> Fit:
+    """Estimate the parameters of ``model`` with ``effects`` by linear least squares.
+
+    Equations that share no estimated parameter are independent least-squares blocks; with
+    ``base`` (an earlier fit on the same record) a block whose equations are unchanged (same
+    columns, checked by content for the parallel-filtered models) is taken over from ``base``
+    instead of being solved again. The estimates are the same either way.
+    """
     effects = tuple(effects)
     n = sig["t"].size
     trim = int(trim)
@@ -86,47 +146,68 @@ def fit(model, sig: dict, effects=(), trim: int = 50) -> Fit:
     for _, cols in eqs.values():
         names += [p for p in cols if p not in names]
     est = [p for p in names if p not in model.fixed]
-    ys, rows = [], []
-    for eq, (y, cols) in eqs.items():
-        y = np.broadcast_to(np.asarray(y, dtype=float), (n,))[keep].copy()
-        for p, c in cols.items():
-            if p in model.fixed:
-                y -= model.fixed[p] * np.asarray(c, dtype=float)[keep]
-        X = np.zeros((y.size, len(est)))
-        for j, p in enumerate(est):
-            if p in cols:
-                X[:, j] = np.asarray(cols[p], dtype=float)[keep]
-        ys.append(y)
-        rows.append(X)
-    y_all, X_all = np.concatenate(ys), np.vstack(rows)
-    if not np.all(np.isfinite(X_all)):
-        raise ValueError("signals: the regressors contain NaN or Inf")
-    # Normal equations on unit-norm columns, formed with einsum (single-threaded): on a busy
-    # machine a threaded BLAS on a tall (N x k) matrix is 10x slower than this, and with unit
-    # columns the k x k system stays well conditioned (cond reported below).
-    scale = np.sqrt(np.einsum("ij,ij->j", X_all, X_all))
-    scale[scale == 0] = 1.0
-    Xs = X_all / scale
-    A = np.einsum("ij,ik->jk", Xs, Xs)
-    theta_est = np.linalg.lstsq(A, np.einsum("ij,i->j", Xs, y_all), rcond=None)[0] / scale
-    sv = np.sqrt(np.maximum(np.linalg.eigvalsh(A)[::-1], 0.0)) if A.size else np.ones(1)
+    sigs = s.get("_signatures")
+    bsigs = base.signals.get("_signatures") if base is not None else None
+    # Normal equations per block, assembled equation by equation (each equation holds only
+    # its own columns), formed with einsum (single-threaded: on a busy machine a threaded BLAS
+    # on a tall matrix is 10x slower), solved on unit-norm columns so the small systems stay
+    # well conditioned.
     theta = dict(model.fixed)
-    theta.update(zip(est, map(float, theta_est)))
-    resid, refs, i0 = {}, {}, 0
-    for (eq, _), y in zip(eqs.items(), ys):
-        m = y.size
-        resid[eq] = y - np.einsum("ij,j->i", X_all[i0:i0 + m], theta_est)
-        refs[eq] = np.broadcast_to(np.asarray(model.reference(eq, s, theta), dtype=float), (n,))[keep]
-        i0 += m
-    return Fit(model, effects, theta, est, resid, refs, s, keep,
-               float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf"))
+    resid, conds = {}, []
+    for comp in _components(eqs, est):
+        if (sigs is not None and bsigs is not None and base.keep == keep
+                and all(bsigs.get(eq) == sigs[eq] for eq in comp)):
+            for eq in comp:
+                resid[eq] = base.residuals[eq]
+                for p in base.columns.get(eq, []):
+                    theta[p] = base.theta[p]
+            continue
+        ps_all = [p for p in est if any(p in eqs[eq][1] for eq in comp)]
+        index = {p: j for j, p in enumerate(ps_all)}
+        k = len(ps_all)
+        A = np.zeros((k, k))
+        b = np.zeros(k)
+        blocks = []
+        for eq in comp:
+            y, cols = eqs[eq]
+            y = np.broadcast_to(np.asarray(y, dtype=float), (n,))[keep].copy()
+            for p, c in cols.items():
+                if p in model.fixed:
+                    y -= model.fixed[p] * np.asarray(c, dtype=float)[keep]
+            ps = [p for p in cols if p in index]
+            X = np.empty((y.size, len(ps)))
+            for j, p in enumerate(ps):
+                X[:, j] = np.broadcast_to(np.asarray(cols[p], dtype=float), (n,))[keep]
+            if not (np.all(np.isfinite(X)) and np.all(np.isfinite(y))):
+                raise ValueError("signals: the regressors contain NaN or Inf")
+            ix = np.array([index[p] for p in ps], dtype=int)
+            A[np.ix_(ix, ix)] += np.einsum("ij,ik->jk", X, X)
+            b[ix] += np.einsum("ij,i->j", X, y)
+            blocks.append((eq, y, X, ix))
+        scale = np.sqrt(np.diag(A)).copy()
+        scale[scale == 0] = 1.0
+        As = A / np.outer(scale, scale)
+        th = np.linalg.lstsq(As, b / scale, rcond=None)[0] / scale if k else np.zeros(0)
+        if k:
+            sv = np.sqrt(np.maximum(np.linalg.eigvalsh(As)[::-1], 0.0))
+            conds.append(float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf"))
+        theta.update(zip(ps_all, map(float, th)))
+        for eq, y, X, ix in blocks:
+            resid[eq] = y - np.einsum("ij,j->i", X, th[ix])
+    if base is not None and len(conds) < len(_components(eqs, est)):
+        conds.append(base.cond)
+    resid = {eq: resid[eq] for eq in eqs}
+    refs = {eq: _reference(model, eq, s, theta, eqs[eq][0], n, keep) for eq in eqs}
+    return Fit(model, effects, theta, est, resid, refs, s, keep, max(conds) if conds else 1.0,
+               {eq: [p for p in cols if p in est] for eq, (_, cols) in eqs.items()})
 
 
 # ----------------------------------------------------------------------------------------
 # free-run simulation
 # ----------------------------------------------------------------------------------------
-def _state(model, pos, vel, acc, u: dict, extra: dict, t: float) -> dict:
-    s = {"t": t, "extra": extra}
+def _state(model, pos, vel, acc, u: dict, extra: dict, t: float, k: int = 0,
+           pre: dict | None = None) -> dict:
+    s = {"t": t, "extra": extra, "k": k, "precomputed": pre or {}}
     s.update(u)
     for p, x, v, a in zip(model.positions, pos, vel, acc):
         s[p], s[p + "_d"], s[p + "_dd"] = x, v, a
@@ -145,11 +226,13 @@ def _eq_error(model, effects, theta, s) -> np.ndarray:
 
 
 def simulate(fitted: Fit, t, inputs: dict, x0=None, v0=None, extra: dict | None = None,
-             substeps: int | None = None) -> dict:
+             substeps: int | None = None, precomputed: dict | None = None) -> dict:
     """Free-run the fitted model from ``inputs`` alone; returns ``{position: array}``.
 
     ``x0`` and ``v0`` are the initial positions and velocities (default: first input-record
-    values given in ``inputs`` for positions, zero velocity).
+    values given in ``inputs`` for positions, zero velocity). ``precomputed`` maps an effect
+    key to ``{parameter: column}`` over the same samples, for effects whose columns need the
+    whole record (``arm_coupling``: evaluated from the measured signals).
     """
     model, effects, theta = fitted.model, fitted.effects, fitted.theta
     t = as_time(t)
@@ -171,33 +254,35 @@ def simulate(fitted: Fit, t, inputs: dict, x0=None, v0=None, extra: dict | None 
         raise ValueError("x0/v0: not finite")
     dt = float(np.mean(np.diff(t)))
 
+    pre = precomputed or {}
+
     def uk(k):
         return {name: u_all[name][k] for name in model.inputs}, {c: a[k] for c, a in ex_all.items()}
 
     u0, e0 = uk(0)
     zero = np.zeros(npos)
-    base = _eq_error(model, effects, theta, _state(model, x, v, zero, u0, e0, t[0]))
+    base = _eq_error(model, effects, theta, _state(model, x, v, zero, u0, e0, t[0], 0, pre))
     A = np.empty((npos, npos))   # e(acc) = base - A acc (the accelerations enter linearly)
     for j in range(npos):
         a = zero.copy()
         a[j] = 1.0
-        A[:, j] = base - _eq_error(model, effects, theta, _state(model, x, v, a, u0, e0, t[0]))
+        A[:, j] = base - _eq_error(model, effects, theta, _state(model, x, v, a, u0, e0, t[0], 0, pre))
     if np.linalg.cond(A) > 1e12:
         raise ValueError("theta: the estimated inertia matrix is singular; cannot simulate")
     Ainv = np.linalg.inv(A)
 
-    def accel(xx, vv, u, ex, tk, effs=effects):
-        return Ainv @ _eq_error(model, effs, theta, _state(model, xx, vv, zero, u, ex, tk))
+    def accel(xx, vv, u, ex, tk, k=0, effs=effects):
+        return Ainv @ _eq_error(model, effs, theta, _state(model, xx, vv, zero, u, ex, tk, k, pre))
 
     if substeps is None:  # |eigenvalues| of the linearised base model (effects left out)
         J = np.zeros((2 * npos, 2 * npos))
         J[:npos, npos:] = np.eye(npos)
-        a0 = accel(x, v, u0, e0, t[0], ())
+        a0 = accel(x, v, u0, e0, t[0], 0, ())
         for j in range(2 * npos):
             h = 1e-6
             xx, vv = x.copy(), v.copy()
             (xx if j < npos else vv)[j % npos] += h
-            J[npos:, j] = (accel(xx, vv, u0, e0, t[0], ()) - a0) / h
+            J[npos:, j] = (accel(xx, vv, u0, e0, t[0], 0, ()) - a0) / h
         lam = float(np.max(np.abs(np.linalg.eigvals(J))))
         substeps = max(1, int(np.ceil(dt * lam / 0.5)))
     substeps = int(substeps)
@@ -209,7 +294,7 @@ def simulate(fitted: Fit, t, inputs: dict, x0=None, v0=None, extra: dict | None 
     for k in range(n - 1):
         u, ex = uk(k)
         for _ in range(substeps):
-            v = v + h * accel(x, v, u, ex, t[k])
+            v = v + h * accel(x, v, u, ex, t[k], k)
             x = x + h * v
         if not np.all(np.isfinite(x)) or np.max(np.abs(x)) > 1e9:
             raise ValueError(f"simulation diverged at t = {t[k]:g} s")
@@ -221,15 +306,35 @@ def free_run_error(fitted: Fit, sig: dict, substeps: int | None = None) -> tuple
     """Simulate over the record of ``sig`` and compare with the measured positions.
 
     The simulation starts at sample ``fitted.keep.start`` (after the derivative filter's edge).
+    Models with a ``free_run_window`` (s) (the flight models: a quadrotor is a chain of
+    integrators flown in closed loop, so a 10 s open-loop run only drifts) are simulated in
+    consecutive windows of that length, each started from the filtered measured state.
     Returns (``{position: {"rmse", "nrmse"}}`` with nrmse = rmse / std(measured), simulated).
     """
     model = fitted.model
     # start after the filter's edge (``trim`` samples), from the filtered position and velocity
-    k0 = min(fitted.keep.start, sig["t"].size - 3)
-    x0 = [sig[p][k0] for p in model.positions]
-    v0 = [sig[p + "_d"][k0] for p in model.positions]
-    sim = simulate(fitted, sig["t"][k0:], {u: sig[u][k0:] for u in model.inputs}, x0=x0, v0=v0,
-                   extra={k: v[k0:] for k, v in sig.get("extra", {}).items()}, substeps=substeps)
+    n = sig["t"].size
+    k0 = min(fitted.keep.start, n - 3)
+    s_eff = apply_effects(model, sig, fitted.effects)
+    pre_all = {e.key: e.columns(s_eff) for e in fitted.effects if hasattr(e, "columns")}
+    window = getattr(model, "free_run_window", None)
+    step = n - k0 if window is None else max(3, int(round(window / sig["dt"])))
+    sim = {p: np.empty(n - k0) for p in model.positions}
+    for a in range(k0, n, step):
+        b = min(a + step, n)
+        if b - a < 3:   # a tail too short to simulate keeps the measured value
+            for p in model.positions:
+                sim[p][a - k0:] = sig[p][a:b]
+            break
+        x0 = [sig[p][a] for p in model.positions]
+        v0 = [sig[p + "_d"][a] for p in model.positions]
+        part = simulate(fitted, sig["t"][a:b], {u: sig[u][a:b] for u in model.inputs}, x0=x0,
+                        v0=v0, extra={k: v[a:b] for k, v in sig.get("extra", {}).items()},
+                        substeps=substeps,
+                        precomputed={key: {c: col[a:b] for c, col in cols.items()}
+                                     for key, cols in pre_all.items()})
+        for p in model.positions:
+            sim[p][a - k0:b - k0] = part[p]
     out = {}
     for p in model.positions:
         e = sim[p] - sig[p + "_raw"][k0:]
@@ -252,7 +357,6 @@ def apply_fit(fitted: Fit, sig: dict, trim: int | None = None) -> Fit:
     for eq, (y, cols) in eqs.items():
         pred = sum(fitted.theta[p] * np.asarray(c, dtype=float) for p, c in cols.items())
         resid[eq] = (np.broadcast_to(np.asarray(y, dtype=float), (n,)) - pred)[keep]
-        refs[eq] = np.broadcast_to(np.asarray(model.reference(eq, s, fitted.theta), dtype=float),
-                                   (n,))[keep]
+        refs[eq] = _reference(model, eq, s, fitted.theta, y, n, keep)
     return Fit(model, fitted.effects, dict(fitted.theta), list(fitted.estimated), resid, refs, s,
-               keep, fitted.cond)
+               keep, fitted.cond, dict(fitted.columns))

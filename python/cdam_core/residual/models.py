@@ -9,11 +9,17 @@ EMPS benchmark's IDIM-LS scripts) followed by central differences (``numpy.gradi
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from scipy import signal as sps
 
 from ._checks import as_signal, as_time, positive
+
+
+@lru_cache(maxsize=64)
+def _butter(order: int, cutoff: float, fs: float) -> np.ndarray:
+    return sps.butter(order, cutoff, fs=fs, output="sos")
 
 
 @dataclass(frozen=True)
@@ -22,10 +28,20 @@ class DerivativeFilter:
 
     cutoff_hz: float = 100.0
     order: int = 4
+    padlen: int | None = None   # sosfiltfilt edge padding (None: scipy's default)
 
     def describe(self) -> str:
         return (f"zero-phase Butterworth low-pass (scipy.signal.filtfilt), order {self.order}, "
                 f"cutoff {self.cutoff_hz:g} Hz, then central differences (numpy.gradient)")
+
+    def lowpass(self, x, dt: float) -> np.ndarray:
+        """The zero-phase low-pass alone (parallel filtering of both equation sides)."""
+        sos = _butter(int(self.order), positive(self.cutoff_hz, "cutoff_hz"), 1.0 / dt)
+        x = np.asarray(x, dtype=float)
+        return sps.sosfiltfilt(sos, x, axis=0, padlen=self._pad(x.shape[0]))
+
+    def _pad(self, n: int):
+        return None if self.padlen is None else min(int(self.padlen), n - 1)
 
     def apply(self, x: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Return (filtered x, first derivative, second derivative)."""
@@ -38,7 +54,7 @@ class DerivativeFilter:
         sos = sps.butter(int(self.order), cutoff, fs=fs, output="sos")
         if x.size <= 3 * (2 * sos.shape[0] + 1):
             raise ValueError(f"signal: {x.size} samples are too few for the order-{self.order} filter")
-        xf = sps.sosfiltfilt(sos, x)
+        xf = sps.sosfiltfilt(sos, x, padlen=self._pad(x.size))
         xd = np.gradient(xf, dt)
         return xf, xd, np.gradient(xd, dt)
 
@@ -55,6 +71,11 @@ class GreyBoxModel:
     viscous: dict[str, tuple[str, str]] = {}   # equation -> (viscous parameter, velocity signal)
     offset: dict[str, str] = {}                # equation -> constant parameter, if any
     defaults: dict[str, str] = {}              # signal -> default dataset column
+    cables: dict = {}     # link equation -> (motor equation, deflection, its rate, stiffness)
+    parallel_filter = False   # also low-pass both sides of every equation (flight models)
+    default_cutoff_hz = 100.0
+    max_steps = 5
+    min_gain = 0.01   # smallest share of the residual SSE an effect must remove to be claimed
 
     def __init__(self, fixed: dict[str, float] | None = None):
         fixed = dict(fixed or {})
@@ -155,6 +176,7 @@ class FlexibleJoint(GreyBoxModel):
     viscous = {"tau_m": ("Dm", "theta_m_d"), "tau_l": ("Dl", "q_d")}
     offset = {}
     defaults = {"tau_m": "tau_m1", "theta_m": "theta_m1", "q": "q1"}
+    cables = {"tau_l": ("tau_m", "defl", "defl_d", "Ks")}
 
     def augment(self, s: dict) -> dict:
         s["defl"] = s["theta_m"] - s["q"]
@@ -174,15 +196,15 @@ class FlexibleJoint(GreyBoxModel):
         return s[eq]
 
 
-MODELS = {"rigid_axis": RigidAxis, "flexible_joint": FlexibleJoint}
-LATER = ("quadrotor", "aerial_manipulator")
+MODEL_NAMES = ("rigid_axis", "flexible_joint", "quadrotor", "aerial_manipulator")
 
 
 def get_model(name: str, fixed: dict | None = None) -> GreyBoxModel:
-    """The declared model called ``name`` (``rigid_axis`` or ``flexible_joint``)."""
-    if name in LATER:
-        raise ValueError(f"model: {name!r} is not yet available (it comes with the simulator); "
-                         f"available: {', '.join(MODELS)}")
-    if name not in MODELS:
-        raise ValueError(f"model: unknown model {name!r}; available: {', '.join(MODELS)}")
-    return MODELS[name](fixed)
+    """The declared model called ``name``: ``rigid_axis``, ``flexible_joint``, ``quadrotor``
+    or ``aerial_manipulator`` (the last two in :mod:`.flight_models`)."""
+    from .flight_models import AerialManipulator, Quadrotor
+    models = {"rigid_axis": RigidAxis, "flexible_joint": FlexibleJoint, "quadrotor": Quadrotor,
+              "aerial_manipulator": AerialManipulator}
+    if not isinstance(name, str) or name not in models:
+        raise ValueError(f"model: unknown model {name!r}; available: {', '.join(MODEL_NAMES)}")
+    return models[name](fixed)

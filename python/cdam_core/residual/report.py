@@ -9,30 +9,41 @@ from pathlib import Path
 import numpy as np
 
 from . import diagnostics as dg
-from .effects import candidates as library_candidates
+from .effects import LIBRARY, candidates as library_candidates
 from .models import DerivativeFilter, get_model
 from .selection import Selection, select
 
 
 def analyse(model: str, t, signals: dict, extra: dict | None = None, fixed: dict | None = None,
-            cutoff_hz: float = 100.0, alpha: float = 0.01, free_run: bool = True,
+            cutoff_hz: float | None = None, alpha: float = 0.01, free_run: bool = True,
             validation: tuple | None = None, options: dict | None = None,
-            max_steps: int = 5) -> Selection:
+            max_steps: int | None = None, declared=()) -> Selection:
     """Fit ``model`` to the signals, select missing effects, return the :class:`Selection`.
 
-    ``signals`` maps the model's signal names (``tau``, ``q`` / ``tau_m``, ``theta_m``, ``q``) to
-    arrays; ``extra`` holds measured channels left out of the model (``external_force``
-    candidates); ``validation`` = (t, signals) of another record for the free-run errors.
+    ``signals`` maps the model's signal names (``tau``, ``q`` / ``tau_m``, ``theta_m``, ``q`` /
+    the dataset's channel names for the flight models) to arrays; ``extra`` holds measured
+    channels left out of the model (``external_force`` candidates); ``validation`` = (t, signals)
+    of another record for the free-run errors; ``fixed``: known parameters (e.g. the weighed
+    mass ``m``, which ``payload_mass`` needs); ``declared``: library effect names the declared
+    model already holds (on every channel they apply to), e.g. the sidecar's model effects;
+    ``cutoff_hz``: derivative filter cutoff (default: the model's, 100 Hz for the axis models,
+    2 Hz for the flight models' body channels).
     """
     m = get_model(model, fixed)
-    filt = DerivativeFilter(cutoff_hz=cutoff_hz)
+    if isinstance(declared, str):
+        declared = [declared]
+    for name in declared:
+        if name not in LIBRARY:
+            raise ValueError(f"declared: unknown effect {name!r} (known: {', '.join(LIBRARY)})")
+    filt = DerivativeFilter(cutoff_hz=m.default_cutoff_hz if cutoff_hz is None else cutoff_hz)
     sig = m.prepare(t, signals, filt, extra)
     val = None
     if validation is not None:
-        val = m.prepare(validation[0], validation[1], filt, None)
+        val = m.prepare(validation[0], validation[1], sig["filter"], None)
     cands = library_candidates(m, list((extra or {}).keys()), options)
+    dec = [c for c in cands if c.name in set(declared)]
     return select(m, sig, cands, alpha=alpha, free_run=free_run, validation=val,
-                  max_steps=max_steps)
+                  max_steps=max_steps, declared_effects=dec)
 
 
 def _clean(x):
@@ -58,7 +69,9 @@ def to_json(sel: Selection) -> dict:
     Error dictionaries are keyed by channel: equation channels (``tau``, ``tau_m``, ``tau_l``)
     hold the equation error (nrmse = ||e|| / ||measured torque||), output channels (``q``,
     ``theta_m``) the free-run error (nrmse = rmse / std(measured)). Extra keys:
-    ``declared_parameters``, ``final_parameters`` and ``settings``.
+    ``declared_parameters``, ``final_parameters``, ``error_final`` (the final model's errors),
+    ``removed_in_backward_pass`` (claims withdrawn when re-tested with all others) and
+    ``settings``.
     """
     model = sel.model
     findings = []
@@ -77,6 +90,8 @@ def to_json(sel: Selection) -> dict:
         "findings": findings,
         "residual_white_after": sel.white_after,
         "unexplained": sel.unexplained,
+        "error_final": sel.final_error,
+        "removed_in_backward_pass": sel.removed,
         "declared_parameters": sel.declared.theta,
         "final_parameters": sel.final.theta,
         "settings": settings,

@@ -7,7 +7,11 @@ significant: an F-test on its added parameters at level ``alpha`` using the effe
 size N_eff = N / tau_int of the candidate model's residual (diagnostics.effective_sample_size),
 and BIC computed on N_eff must fall. The best significant candidate is added, the model is
 re-estimated, and the loop repeats until the residual is white (Ljung-Box) or nothing is
-significant. Structure left over (spectral peaks) is reported as ``unexplained``.
+significant. The statistics are taken over the equations the candidate changes (so a small
+joint-torque equation is not drowned in the force equations of a flight model). A backward pass
+then re-tests every claimed effect with all the others present and drops those no longer
+significant (``Selection.removed``). Structure left over (spectral peaks) is reported as
+``unexplained``.
 """
 from __future__ import annotations
 
@@ -63,6 +67,8 @@ class Selection:
     unexplained: list
     settings: dict = field(default_factory=dict)
     free_run: dict = field(default_factory=dict)   # label -> simulated positions
+    final_error: dict = field(default_factory=dict)  # errors of the final model
+    removed: list = field(default_factory=list)      # effects dropped by the backward pass
 
 
 def _yty(f: Fit) -> float:
@@ -72,40 +78,53 @@ def _yty(f: Fit) -> float:
     return tot
 
 
-def _fit_with(model, sig, effects, eff, trim):
+def _fit_with(model, sig, effects, eff, trim, base=None):
     """Fit with ``eff`` added; a searched parameter is chosen by bounded 1-D search on SSE."""
     if eff.search is None:
-        return eff, fit(model, sig, effects + (eff,), trim)
+        return eff, fit(model, sig, effects + (eff,), trim, base)
     lo, hi = eff.search_bounds(sig, model)
     if not hi > lo:
-        return eff, fit(model, sig, effects + (eff,), trim)
+        return eff, fit(model, sig, effects + (eff,), trim, base)
     grid = np.linspace(lo, hi, 13)
-    sse = [fit(model, sig, effects + (eff.with_value(x),), trim).sse for x in grid]
+    sse = [fit(model, sig, effects + (eff.with_value(x),), trim, base).sse for x in grid]
     i = int(np.argmin(sse))
     a, b = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
     res = optimize.minimize_scalar(
-        lambda x: fit(model, sig, effects + (eff.with_value(x),), trim).sse,
+        lambda x: fit(model, sig, effects + (eff.with_value(x),), trim, base).sse,
         bounds=(a, b), method="bounded", options={"xatol": (hi - lo) * 1e-4})
     x = res.x if res.fun < sse[i] else grid[i]
     e = eff.with_value(x)
-    return e, fit(model, sig, effects + (e,), trim)
+    return e, fit(model, sig, effects + (e,), trim, base)
 
 
-def evaluate(model, sig, current: Fit, eff, alpha: float = 0.01, trim: int = 50,
-             min_gain: float = 0.01) -> Candidate:
-    """Fit ``current`` + ``eff`` and test it (ERR, F-test on N_eff, BIC on N_eff).
+def _changed_equations(current: Fit, f1: Fit, eff, model) -> list:
+    """Equations the candidate touches: where it adds columns, or whose residual sum of
+    squares moves by more than 0.1 % (model changes, shared parameters)."""
+    out = []
+    touched = set(eff.regressors(f1.signals, model)) if not eff.search else set()
+    for eq, r1 in f1.residuals.items():
+        s0 = float(np.sum(current.residuals[eq] ** 2))
+        s1 = float(np.sum(r1 ** 2))
+        if eq in touched or eq == eff.channel or abs(s1 - s0) > 1e-3 * max(s0, 1e-300):
+            out.append(eq)
+    return out or list(f1.residuals)
 
-    ``min_gain``: the smallest share of the current residual sum of squares an effect must
-    remove to be claimed (1 %): with 10^4 samples a model mismatch far below any practical
-    interest (derivative-filter bias, integration error) is otherwise "significant".
-    """
-    eff, f1 = _fit_with(model, sig, current.effects, eff, trim)
+
+def compare(model, sig, current: Fit, f1: Fit, eff, alpha: float = 0.01,
+            min_gain: float = 0.01) -> Candidate:
+    """Test ``f1`` (= ``current`` + ``eff``) against ``current`` on the equations ``eff`` changes:
+    ERR, an F-test on the effective sample size and BIC on it (module docstring)."""
+    eqs = _changed_equations(current, f1, eff, model)
     p = max(1, f1.k - current.k + (1 if eff.search else 0))
-    sse0, sse1 = current.sse, f1.sse
-    taus = [dg.effective_sample_size(r)["tau_int"] for r in f1.residuals.values()]
-    tau = max(taus)
-    n_eff = f1.n_rows / tau
+    sse0 = sum(float(np.sum(current.residuals[e] ** 2)) for e in eqs)
+    sse1 = sum(float(np.sum(f1.residuals[e] ** 2)) for e in eqs)
+    yty = sum(float(np.sum(current.references[e] ** 2)) for e in eqs)
+    tau = max(dg.effective_sample_size(f1.residuals[e])["tau_int"] for e in eqs)
+    n_rows = sum(f1.residuals[e].size for e in eqs)
+    n_eff = n_rows / tau
     k1 = f1.k + sum(1 for e in f1.effects if e.search)
+    if len(eqs) < len(f1.residuals):   # only the parameters of the equations tested
+        k1 = len({q for e in eqs for q in f1.columns.get(e, [])}) + (1 if eff.search else 0)
     dof = max(n_eff - k1, 1.0)
     gain = max(sse0 - sse1, 0.0)
     f_stat = (gain / p) / (sse1 / dof) if sse1 > 0 else np.inf
@@ -116,12 +135,26 @@ def evaluate(model, sig, current: Fit, eff, alpha: float = 0.01, trim: int = 50,
         x = getattr(eff, eff.search[0])
         if hi > lo and min(x - lo, hi - x) <= 0.01 * (hi - lo):
             pval, dbic = 1.0, float("inf")
-    c = Candidate(eff, f1, p, gain / _yty(current), float(f_stat), pval, float(dbic),
+    c = Candidate(eff, f1, p, gain / yty if yty > 0 else 0.0, float(f_stat), pval, float(dbic),
                   float(n_eff), float(tau))
     c._alpha = alpha
     c.gain = gain / sse0 if sse0 > 0 else 0.0
     c._min_gain = min_gain
+    c.equations = eqs
     return c
+
+
+def evaluate(model, sig, current: Fit, eff, alpha: float = 0.01, trim: int = 50,
+             min_gain: float = 0.01) -> Candidate:
+    """Fit ``current`` + ``eff`` and test it (ERR, F-test on N_eff, BIC on N_eff).
+
+    ``min_gain``: the smallest share of the current residual sum of squares (over the
+    equations the effect changes) an effect must remove to be claimed (1 %): with 10^4
+    samples a model mismatch far below any practical interest (derivative-filter bias,
+    integration error) is otherwise "significant".
+    """
+    eff, f1 = _fit_with(model, sig, current.effects, eff, trim, current)
+    return compare(model, sig, current, f1, eff, alpha, min_gain)
 
 
 def _requirements_met(eff, effects) -> bool:
@@ -133,31 +166,78 @@ def _errors(f: Fit, sig_fr, free_run: bool, substeps, store=None, label=""):
     out = dict(f.equation_error())
     if free_run:
         fr, sim = free_run_error(f, sig_fr, substeps)
-        out.update(fr)
+        # a position named like an equation (X, Y, Z of the flight models) gets "_sim"
+        out.update({(k + "_sim" if k in out else k): v for k, v in fr.items()})
         if store is not None:
             store[label] = sim
     return out
 
 
-def select(model, sig: dict, candidates, alpha: float = 0.01, max_steps: int = 5,
-           trim: int = 50, free_run: bool = True, validation: dict | None = None,
+def backward(model, sig, current: Fit, protected=(), alpha: float = 0.01, trim: int = 50,
+             min_gain: float = 0.01) -> tuple[Fit, list]:
+    """Backward elimination: re-test every claimed effect with all the others in the model
+    (the reduced model re-estimated without it); drop the least significant one that fails,
+    repeat. ``protected``: keys that are never dropped (declared effects). Returns the final
+    fit and ``[{"effect", "channel", "p_value", "sse_share_removed"}]`` of the dropped ones."""
+    removed = []
+    while True:
+        claimed = [e for e in current.effects if e.key not in protected]
+        worst = None
+        for e in claimed:
+            others = tuple(x for x in current.effects if x is not e)
+            if any(e.name in o.requires and o.channel == e.channel for o in others):
+                continue   # asymmetric friction needs its Coulomb term: test them in that order
+            reduced = fit(model, sig, others, trim, current)
+            c = compare(model, sig, reduced, current, e, alpha, min_gain)
+            if not c.significant and (worst is None or c.pvalue > worst[1].pvalue
+                                      or (c.pvalue == worst[1].pvalue and c.gain < worst[1].gain)):
+                worst = (reduced, c)
+        if worst is None:
+            return current, removed
+        reduced, c = worst
+        removed.append({"effect": c.effect.name, "channel": c.effect.channel,
+                        "p_value": c.pvalue, "sse_share_removed": c.gain,
+                        "delta_bic": c.dbic})
+        current = reduced
+
+
+def select(model, sig: dict, candidates, alpha: float = 0.01, max_steps: int | None = None,
+           trim: int | None = None, free_run: bool = True, validation: dict | None = None,
            substeps: int | None = None, lags: int = 25, min_prominence: float = 1.0,
-           spectrum_seconds: float = 0.25, min_gain: float = 0.01) -> Selection:
+           spectrum_seconds: float = 0.25, min_gain: float | None = None,
+           declared_effects=()) -> Selection:
     """Run the stepwise selection on the prepared signals ``sig``.
 
     ``validation``: prepared signals of another record on which the free-run errors are
-    computed (default: the same record). Returns a :class:`Selection`.
+    computed (default: the same record). ``declared_effects``: effects the declared model
+    already holds (the sidecar's ``model.effects``); they are estimated from the start and never
+    claimed or dropped. ``max_steps`` and ``trim`` default to the model's (5 and 50 samples for
+    the axis models; the flight models set their own). After the forward steps a backward pass
+    re-tests each claimed effect with all the others present (:func:`backward`). Returns a
+    :class:`Selection`.
     """
     if not 0 < alpha < 1:
         raise ValueError(f"alpha: must be in (0, 1), got {alpha}")
+    if max_steps is None:
+        max_steps = getattr(model, "max_steps", 5)
+    if min_gain is None:   # 1 %; the flight models 5 % (see flight_models.Quadrotor.min_gain)
+        min_gain = getattr(model, "min_gain", 0.01)
     if int(max_steps) < 0:
         raise ValueError(f"max_steps: must be >= 0, got {max_steps}")
-    for c in candidates:
+    if trim is None:
+        ts = getattr(model, "trim_seconds", None)
+        trim = 50 if ts is None else max(50, int(round(ts / sig["dt"])))
+    declared_effects = tuple(declared_effects)
+    for c in tuple(candidates) + declared_effects:
         if not c.applies_to(model):
             raise ValueError(f"candidates: {c.key} does not apply to {model.name}")
+    dkeys = {e.key for e in declared_effects}
+    candidates = [c for c in candidates if c.key not in dkeys]
     sig_fr = validation if validation is not None else sig
     store: dict = {}
     declared = fit(model, sig, (), trim)
+    for e in declared_effects:   # searched parameters of declared effects are searched once
+        e2, declared = _fit_with(model, sig, declared.effects, e, trim)
     current = declared
     err_current = _errors(declared, sig_fr, free_run, substeps, store, "declared")
     declared_error = dict(err_current)
@@ -196,6 +276,13 @@ def select(model, sig: dict, candidates, alpha: float = 0.01, max_steps: int = 5
         steps.append(Step(best, current, err_current, err_after, evidence,
                           [(c.effect.key, c.err, c.pvalue, c.dbic) for c in ranked]))
         current, err_current = best.fit, err_after
+    current, removed = backward(model, sig, current, dkeys, alpha, trim, min_gain)
+    if removed:
+        gone = {(r["effect"], r["channel"]) for r in removed}
+        steps = [st for st in steps if (st.candidate.effect.name, st.candidate.effect.channel)
+                 not in gone]
+    final_error = _errors(current, sig_fr, free_run, substeps, store, "final") if removed \
+        else dict(err_current)
     white = all(dg.whiteness(r, lags)["white"] for r in current.residuals.values())
     unexplained = []
     # above the derivative filter's band the equation error holds only the unfiltered
@@ -203,12 +290,18 @@ def select(model, sig: dict, candidates, alpha: float = 0.01, max_steps: int = 5
     # filter's shape, not structure), so peaks are sought below 0.5 x cutoff
     fmax = 0.5 * sig["filter"].cutoff_hz if "filter" in sig else None
     for eq, r in current.residuals.items():
-        for pk in dg.spectral_peaks(r, fs, min_prominence=min_prominence, fmax=fmax,
-                                    seconds=spectrum_seconds):
+        seconds, fmin, fm = spectrum_seconds, 1.0, fmax
+        if getattr(model, "parallel_filter", False):   # the equation's own band: longer
+            cut = model.equation_filter(eq, sig).cutoff_hz   # segments resolve slow peaks
+            seconds = max(spectrum_seconds, 8.0 / cut)
+            fmin, fm = min(1.0, 2.0 / seconds), 0.5 * cut
+        for pk in dg.spectral_peaks(r, fs, min_prominence=min_prominence, fmin=fmin, fmax=fm,
+                                    seconds=seconds):
             ac = dg.autocorrelation(r, lags)
             unexplained.append({"kind": "spectral_peak", "channel": eq, **pk,
                                 "acf_lags_outside_band": len(ac["outside"])})
-    settings = {"alpha": alpha, "min_gain": min_gain, "trim": trim, "lags": lags, "min_prominence_decades": min_prominence,
+    settings = {"declared_effects": sorted(dkeys), "removed_in_backward_pass": removed,
+                "alpha": alpha, "min_gain": min_gain, "trim": trim, "lags": lags, "min_prominence_decades": min_prominence,
                 "candidates": [c.key for c in candidates]}
     return Selection(model, declared, current, steps, declared_error, white, unexplained,
-                     settings, store)
+                     settings, store, final_error, removed)
