@@ -5,6 +5,7 @@
 #include <doctest/doctest.h>
 
 #include <Eigen/Core>
+#include <algorithm>
 #include <cmath>
 #include <vector>
 
@@ -146,6 +147,74 @@ TEST_CASE("BpFitness: independent of the thread count and equal to per-sample fo
     CHECK(f2(thetas.col(k).data()) == o1[k]);
     CHECK(o1[k] == doctest::Approx(ref(thetas.col(k).data())).epsilon(1e-12));
   }
+}
+
+TEST_CASE("vectorised activations agree with std::tanh and the logistic function") {
+  // dense grid plus tiny, huge and exactly-zero arguments; both compiled paths
+  std::vector<double> grid;
+  for (int k = -400000; k <= 400000; ++k) grid.push_back(k * 1e-4);
+  for (double v : {1e-300, -1e-200, 1e-12, -3e-9, 0.0, 710.0, -710.0, 1e300, -1e300})
+    grid.push_back(v);
+  for (KernelPath p : {KernelPath::Auto, KernelPath::Generic}) {
+    std::vector<double> t = grid, l = grid;
+    activate_inplace(t.data(), static_cast<Index>(t.size()), Activation::Tansig, p);
+    activate_inplace(l.data(), static_cast<Index>(l.size()), Activation::Logsig, p);
+    double abs_t = 0, rel_t = 0, rel_l = 0;
+    for (size_t k = 0; k < grid.size(); ++k) {
+      const double et = std::tanh(grid[k]), el = 1.0 / (1.0 + std::exp(-grid[k]));
+      abs_t = std::max(abs_t, std::abs(t[k] - et));
+      if (et != 0) rel_t = std::max(rel_t, std::abs(t[k] - et) / std::abs(et));
+      if (el > 1e-290) rel_l = std::max(rel_l, std::abs(l[k] - el) / el);
+      REQUIRE(std::isfinite(t[k]));
+      REQUIRE(std::isfinite(l[k]));
+    }
+    CHECK(abs_t < 5e-16);
+    CHECK(rel_t < 2e-15);
+    CHECK(rel_l < 2e-15);
+  }
+}
+
+TEST_CASE("BpFitness: the AVX2 and the generic kernel agree; odd sizes and logsig") {
+  const Index i = 7, h = 13, m = 3, N = 1001;  // sizes that leave vector remainders
+  for (Activation act : {Activation::Tansig, Activation::Logsig}) {
+    Mlp<double> net(i, h, m, act);
+    Rng rng(9);
+    Eigen::MatrixXd X(i, N), T(m, N), thetas(net.num_params(), 3);
+    for (Index k = 0; k < X.size(); ++k) X.data()[k] = rng.uniform(-2.0, 2.0);
+    for (Index k = 0; k < T.size(); ++k) T.data()[k] = rng.uniform(-1.0, 1.0);
+    for (Index k = 0; k < thetas.size(); ++k) thetas.data()[k] = rng.uniform(-3.0, 3.0);
+    NormalEquations<double>::ConstMap Xm(X.data(), i, N), Tm(T.data(), m, N);
+    BpFitness<double> fa(net, Xm, Tm, 2), fg(net, Xm, Tm, 1);
+    fg.set_path(KernelPath::Generic);
+    MlpFitness<Mlp<double>> ref(net, X.data(), T.data(), N);
+    double oa[3], og[3];
+    fa.batch(thetas.data(), 3, oa);
+    fg.batch(thetas.data(), 3, og);
+    for (int k = 0; k < 3; ++k) {
+      const double r = ref(thetas.col(k).data());
+      CHECK(oa[k] == doctest::Approx(r).epsilon(1e-13));
+      CHECK(og[k] == doctest::Approx(r).epsilon(1e-13));
+    }
+  }
+}
+
+TEST_CASE("syrk_lower equals Eigen's rank update on and below the diagonal") {
+  for (Index P : {3, 13, 160})
+    for (Index nb : {1, 37, 256}) {
+      Eigen::MatrixXd V(P + 2, nb), K0 = Eigen::MatrixXd::Zero(P, P);
+      Rng rng(static_cast<std::uint32_t>(P * 1000 + nb));
+      for (Index k = 0; k < V.size(); ++k) V.data()[k] = rng.uniform(-2.0, 2.0);
+      // leading dimension P + 2: the kernel must honour ldv
+      K0.selfadjointView<Eigen::Lower>().rankUpdate(V.topRows(P));
+      for (KernelPath p : {KernelPath::Auto, KernelPath::Generic}) {
+        Eigen::MatrixXd K = Eigen::MatrixXd::Constant(P + 1, P, 1.0);  // ldg P + 1, start at 1
+        syrk_lower(K.data(), P + 1, V.data(), P + 2, P, nb, p);
+        for (Index c = 0; c < P; ++c)
+          for (Index r = c; r < P; ++r)
+            REQUIRE(K(r, c) - 1.0 == doctest::Approx(K0(r, c)).epsilon(1e-13).scale(nb * 4.0));
+        for (Index c = 0; c < P; ++c) CHECK(K(P, c) == 1.0);  // padding row untouched
+      }
+    }
 }
 
 TEST_CASE("target build: fixed-size IBOA-BP (4-8-2, 20 butterflies) allocates nothing") {

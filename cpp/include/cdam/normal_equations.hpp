@@ -11,15 +11,22 @@
 // Per sample this costs about (h(i+1))^2 / 2 + (h+1) h (i+1) multiply-adds instead of the
 // m D^2 of forming J'J from J: for 6-20-8 about 12,700 against 759,000.
 //
+// On a CPU with AVX2 + FMA (double), S, C and R come from one fused rank update of the stacked
+// [v; a] (optim/sse_kernel.hpp syrk_lower, about three times Eigen's SSE2 rankUpdate);
+// otherwise from Eigen's rankUpdate and product, as written above.
+// The hidden activation (double) is the vectorised one of optim/sse_kernel.hpp (within 5e-16 of
+// std::tanh / the logistic function; about ten times faster than the scalar libm call).
 // This is host code: the workspace is allocated once, in the constructor (the one place that
 // allocates); evaluate() allocates nothing.
 #pragma once
 #include <Eigen/Core>
 #include <algorithm>
 #include <thread>
+#include <type_traits>
 #include <vector>
 
 #include "mlp.hpp"
+#include "optim/sse_kernel.hpp"
 
 namespace cdam {
 
@@ -78,22 +85,31 @@ class NormalEquations {
   struct Worker {
     const Net& net;
     Index i, h, m;
-    Mat A, D, Y, E, G, V;      // h x B, h x B, m x B, m x B, h x B, h(i+1) x B
+    Mat A, D, Y, E, G, V;      // h x B, h x B, m x B, m x B, h x B, (h(i+1) + h) x B
     Mat S, R, C, gH, gO;       // h(i+1) sq, (h+1) sq, (h+1) x h(i+1), h x (i+1), m x (h+1)
+    Mat K;                     // (h(i+1) + h) sq: [v; a] [v; a]' (the fused AVX2 path)
+    bool fused;                // double on an AVX2 + FMA CPU: one SYRK gives S, C and R
     double sse = 0.0;
 
     Worker(const Net& n_, Index B)
         : net(n_), i(n_.inputs()), h(n_.hidden()), m(n_.outputs()),
-          A(h, B), D(h, B), Y(m, B), E(m, B), G(h, B), V(h * (i + 1), B),
+          A(h, B), D(h, B), Y(m, B), E(m, B), G(h, B), V(h * (i + 1) + h, B),
           S(h * (i + 1), h * (i + 1)), R(h + 1, h + 1), C(h + 1, h * (i + 1)), gH(h, i + 1),
-          gO(m, h + 1) {}
+          gO(m, h + 1) {
+      if constexpr (std::is_same<Scalar, double>::value) fused = optim::avx2_path(optim::KernelPath::Auto);
+      else fused = false;
+      if (fused) K.resize(h * (i + 2), h * (i + 2));
+    }
 
     void forward(const Scalar* theta, const ConstMap& X, Index b0, Index nb) {
       auto a = A.leftCols(nb);
       a.noalias() = net.W1(theta) * X.middleCols(b0, nb);
       a.colwise() += net.b1(theta);
       const Activation act = net.activation();
-      a = a.unaryExpr([act](Scalar v) { return activate(act, v); });
+      if constexpr (std::is_same<Scalar, double>::value)
+        optim::activate_inplace(a.data(), h * nb, act);  // vectorised, within 5e-16 of std::tanh
+      else
+        a = a.unaryExpr([act](Scalar v) { return activate(act, v); });
       auto y = Y.leftCols(nb);
       y.noalias() = net.W2(theta) * a;
       y.colwise() += net.b2(theta);
@@ -103,7 +119,8 @@ class NormalEquations {
              int mode) {
       sse = 0.0;
       if (mode >= 1) { gH.setZero(); gO.setZero(); }
-      if (mode == 2) { S.setZero(); R.setZero(); C.setZero(); }
+      if (mode == 2) { S.setZero(); R.setZero(); C.setZero(); if (fused) K.setZero(); }
+      const Index P = h * (i + 1);
       const Index B = A.cols();
       const Activation act = net.activation();
       for (Index b0 = lo; b0 < hi; b0 += B) {
@@ -125,16 +142,29 @@ class NormalEquations {
         gO.leftCols(h).noalias() += e * a.transpose();
         gO.col(h) += e.rowwise().sum();
         if (mode < 2) continue;
-        auto v = V.leftCols(nb);
+        auto v = V.topLeftCorner(P, nb);
         for (Index l = 0; l < i; ++l)
           v.middleRows(l * h, h).array() = d.array().rowwise() * xb.row(l).array();
         v.middleRows(i * h, h) = d;
-        S.template selfadjointView<Eigen::Lower>().rankUpdate(v);
-        R.topLeftCorner(h, h).template selfadjointView<Eigen::Lower>().rankUpdate(a);
+        if constexpr (std::is_same<Scalar, double>::value) {
+          if (fused) {
+            V.block(P, 0, h, nb) = a;
+            optim::syrk_lower(K.data(), K.rows(), V.data(), V.rows(), P + h, nb);
+          }
+        }
+        if (!fused) {
+          S.template selfadjointView<Eigen::Lower>().rankUpdate(v);
+          R.topLeftCorner(h, h).template selfadjointView<Eigen::Lower>().rankUpdate(a);
+          C.topRows(h).noalias() += a * v.transpose();
+        }
         R.row(h).head(h) += a.rowwise().sum().transpose();
         R(h, h) += Scalar(nb);
-        C.topRows(h).noalias() += a * v.transpose();
         C.row(h) += v.rowwise().sum().transpose();
+      }
+      if (mode == 2 && fused) {
+        S.template triangularView<Eigen::Lower>() = K.topLeftCorner(P, P);
+        C.topRows(h) = K.block(P, 0, h, P);
+        R.topLeftCorner(h, h).template triangularView<Eigen::Lower>() = K.block(P, P, h, h);
       }
     }
 

@@ -24,6 +24,12 @@ def register(subparsers) -> None:
     p.add_argument("--seeds", type=int, default=10, help="seeds per algorithm (default 10)")
     p.add_argument("--hidden", type=int, default=20)
     p.add_argument("--narx", default=None, help="NARX orders na,nb,nk (default: static map)")
+    p.add_argument("--model", default="bp", choices=["bp", "hybrid"],
+                   help="bp: the paper's network (static or NARX); hybrid: linear ARX with the "
+                        "algorithm's network on its residual (needs --narx)")
+    p.add_argument("--features", default="raw", choices=["raw", "physics"],
+                   help="hybrid inputs: raw, or physics (4 motor commands in X-mixer order: "
+                        "commands, thrust ~ sum of squares, roll/pitch/yaw torque combinations)")
     p.add_argument("--inputs", default=None, help="comma-separated input columns")
     p.add_argument("--outputs", default=None, help="comma-separated output columns")
     p.add_argument("--smoothing", type=int, default=5, help="five-point smoothing passes")
@@ -93,9 +99,18 @@ def run(args) -> int:
         va = read_dataset(args.validate, inputs=train.inputs, outputs=train.outputs)
         records["validation"] = (va.select(train.inputs), va.select(train.outputs))
         times["validation"] = va.t
+    if args.model == "hybrid" and args.narx is None:
+        raise CliError("--model hybrid: needs --narx na,nb,nk")
+    if args.features != "raw" and args.model != "hybrid":
+        raise CliError("--features physics: needs --model hybrid")
+    if args.features == "physics" and len(train.inputs) != 4:
+        raise CliError(f"--features physics: needs 4 motor-command inputs, got {len(train.inputs)}")
+    if args.save and args.model == "hybrid":
+        raise CliError("--save: only the bp model has a model file; hybrid models are not saved")
     cfg = IdentifyConfig(hidden=args.hidden, narx=_narx(args.narx),
                          smoothing_passes=args.smoothing, iterations=args.iterations,
-                         population=args.population, lm_epochs=args.epochs, lm_goal=args.goal)
+                         population=args.population, lm_epochs=args.epochs, lm_goal=args.goal,
+                         model=args.model, features=args.features)
     algos = ["iboa", "boa", "cabc", "bp"] if args.algo == "all" else [args.algo]
     result = compare(algos, U, Y, records=records, seeds=range(args.seeds), config=cfg,
                      names=train.outputs, progress=not args.quiet)

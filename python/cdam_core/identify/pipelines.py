@@ -12,6 +12,11 @@ One run (``identify``):
    (:func:`evaluate`): Pearson r, RMSE, NRMSE, one-step and, for NARX models, free-run.
 The reported "fitness" is the adaptation value 1 / (1 + MSE) of the final training MSE.
 
+``IdentifyConfig(model="hybrid", narx=(na, nb, nk), features="raw"|"physics")`` identifies a
+linear ARX part by least squares and trains the algorithm's network on its residual
+(identify/hybrid.py); its final MSE is the combined model's one-step training MSE in min-max
+normalised units.
+
 ``backend="reference"`` runs the same pipeline on the numpy twins (reference optimisers and
 ``cdam_core.reference.BPNetwork``): the benchmark's baseline.
 """
@@ -54,6 +59,8 @@ class IdentifyConfig:
     lm_goal: float = 0.003
     threads: int = 2
     optimiser_options: dict = field(default_factory=dict)
+    model: str = "bp"             # "bp": the paper's network; "hybrid": ARX + residual network
+    features: str = "raw"         # "raw" or "physics" (hybrid only; identify/hybrid.py)
 
     def __post_init__(self):
         if self.hidden != "auto" and (not isinstance(self.hidden, (int, np.integer))
@@ -72,6 +79,14 @@ class IdentifyConfig:
                 raise ValueError(f"narx: expected (na, nb, nk) >= 0 with na + nb >= 1, "
                                  f"got {self.narx!r}")
             self.narx = narx
+        if self.model not in ("bp", "hybrid"):
+            raise ValueError(f"model: unknown {self.model!r}; use 'bp' or 'hybrid'")
+        if self.features not in ("raw", "physics"):
+            raise ValueError(f"features: unknown {self.features!r}; use 'raw' or 'physics'")
+        if self.model == "bp" and self.features != "raw":
+            raise ValueError("features: 'physics' needs model='hybrid'")
+        if self.model == "hybrid" and self.narx is None:
+            raise ValueError("narx: model='hybrid' needs orders (na, nb, nk)")
         lb, ub = (float(b) for b in self.bounds)
         if not (np.isfinite(lb) and np.isfinite(ub) and lb < ub):
             raise ValueError(f"bounds: expected finite (lb, ub) with lb < ub, got {self.bounds!r}")
@@ -175,6 +190,10 @@ def identify(algo: str, U, Y, *, seed: int = 0, config: IdentifyConfig | None = 
     t_start = time.perf_counter()
     if not preprocessed:
         U, Y = preprocess(U, Y, cfg.smoothing_passes)
+    if cfg.model == "hybrid":
+        if backend != "core":
+            raise ValueError("backend: model='hybrid' runs on the core only")
+        return _identify_hybrid(algo, U, Y, int(seed), cfg, t_start)
     net = Net(hidden=cfg.hidden, activation=cfg.activation, epochs=cfg.lm_epochs,
               goal=cfg.lm_goal, narx=cfg.narx, seed=int(seed), threads=cfg.threads)
     theta0, curve, opt_mse, evals = None, None, None, 0
@@ -201,6 +220,19 @@ def identify(algo: str, U, Y, *, seed: int = 0, config: IdentifyConfig | None = 
                        evaluations=evals, lm_mse=lm_mse, final_mse=float(lm_mse[-1]),
                        seconds={"optimise": t_opt, "lm": t_lm,
                                 "total": time.perf_counter() - t_start})
+
+
+def _identify_hybrid(algo, U, Y, seed, cfg, t_start) -> IdentifyRun:
+    """Linear ARX + ``algo``-BP network on its residual (identify/hybrid.py)."""
+    from .hybrid import HybridNarx
+    model = HybridNarx(cfg.narx, cfg.features, algo=algo, config=cfg, seed=seed).fit(U, Y)
+    run = model.run_
+    total = time.perf_counter() - t_start
+    return IdentifyRun(algo=algo, seed=seed, model=model, curve=run.curve,
+                       optimiser_mse=run.optimiser_mse, evaluations=run.evaluations,
+                       lm_mse=run.lm_mse, final_mse=model.train_mse_,
+                       seconds={"optimise": run.seconds["optimise"], "lm": run.seconds["lm"],
+                                "total": total})
 
 
 def evaluate(model, U, Y, names=None, *, smoothing_passes: int = 0) -> dict:

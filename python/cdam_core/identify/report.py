@@ -103,7 +103,9 @@ def write_report(result: dict, directory, *, records: dict | None = None, times:
              f"({cfg['activation']}), NARX orders {cfg['narx'] or 'none (static map)'}; "
              f"smoothing passes {cfg['smoothing_passes']}; population {cfg['population']}, "
              f"Tmax {cfg['iterations']}, SP {cfg['switch_probability']}, CABC limit "
-             f"{cfg['cabc_limit']}; LM at most {cfg['lm_epochs']} epochs, goal {cfg['lm_goal']}.",
+             f"{cfg['cabc_limit']}; LM at most {cfg['lm_epochs']} epochs, goal {cfg['lm_goal']}."
+             + (f" Model: hybrid (linear ARX + the algorithm's network on its residual), "
+                f"{cfg.get('features', 'raw')} features." if cfg.get("model") == "hybrid" else ""),
              "", "Fitness = adaptation value 1 / (1 + MSE), MSE the final training error in "
              "normalised units. Metrics compare back-normalised predictions with the "
              "preprocessed (smoothed) measurements; NRMSE = RMSE / std(measured).", "",

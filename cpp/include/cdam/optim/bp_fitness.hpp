@@ -5,22 +5,28 @@
 // MlpFitness<Net> (target and host, any Mlp<Scalar, I, H, O>): Mlp::forward per sample on
 // caller-owned data, no heap (fixed sizes: the hidden and output buffers are members).
 //
-// BpFitness<Scalar> (host): the record is cut into a fixed number of contiguous chunks that
-// depends only on N; every (individual, chunk) partial SSE is computed by one thread with its
-// own blocked evaluator (SseWorker: W1 X and W2 A as matrix products over 256 samples, the
-// activation vectorised as tanh(n) = 1 - 2 / (exp(2 n) + 1), logsig 1 / (1 + exp(-n)), which
-// agree with std::tanh to a few 1e-16 absolute and run about twice as fast), and the partials
-// of an individual are summed in chunk order. The result is therefore bit-identical for any thread count. The constructor
-// allocates (the one place); evaluating allocates nothing unless a batch is larger than any
-// seen before.
+// BpFitness<Scalar> (host): the record is copied once into a channel-contiguous layout and
+// cut into a fixed number of contiguous chunks that depends only on N; every (individual,
+// chunk) partial SSE is computed by one thread with the vectorised kernel of sse_kernel.hpp
+// (blocks of 128 samples, one exponential and one division per activation, AVX2 + FMA when
+// the CPU has them). threads - 1 pool threads, started by the constructor and parked on a
+// condition variable between batches, and the caller take tasks from a shared counter (a
+// descheduled thread delays only the chunk it holds); the partials of an individual are summed
+// in chunk order. The result is therefore bit-identical for any thread count. The constructor allocates (the one place);
+// evaluating allocates nothing unless a batch is larger than any seen before.
 #pragma once
 #include <Eigen/Core>
 #include <algorithm>
+#include <atomic>
+#include <condition_variable>
+#include <mutex>
 #include <thread>
+#include <type_traits>
 #include <vector>
 
 #include "../mlp.hpp"
 #include "../normal_equations.hpp"
+#include "sse_kernel.hpp"
 
 namespace cdam::optim {
 
@@ -61,55 +67,37 @@ class MlpFitness {
   Eigen::Matrix<Scalar, Net::kOutputs, 1> y_;
 };
 
-// SSE of one theta over a range of samples, in blocks of B samples (host; the workspace is
-// allocated by the constructor).
-template <typename Scalar>
-class SseWorker {
- public:
-  using Mat = Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic>;
-  using Map = Eigen::Map<const Mat>;
-  SseWorker(const Mlp<Scalar>& net, Index B = 256)
-      : net_(net), A_(net.hidden(), B), Y_(net.outputs(), B) {}
-
-  double sse(const Scalar* theta, const Map& X, const Map& T) {
-    double total = 0;
-    const Index B = A_.cols();
-    const bool tansig = net_.activation() == Activation::Tansig;
-    for (Index b0 = 0; b0 < X.cols(); b0 += B) {
-      const Index nb = std::min(B, X.cols() - b0);
-      auto a = A_.leftCols(nb);
-      a.noalias() = net_.W1(theta) * X.middleCols(b0, nb);
-      a.colwise() += net_.b1(theta);
-      if (tansig)
-        a = Scalar(1) - Scalar(2) / ((Scalar(2) * a.array()).exp() + Scalar(1));
-      else
-        a = Scalar(1) / ((-a.array()).exp() + Scalar(1));
-      auto y = Y_.leftCols(nb);
-      y.noalias() = net_.W2(theta) * a;
-      y.colwise() += net_.b2(theta);
-      y = T.middleCols(b0, nb) - y;
-      total += static_cast<double>(y.squaredNorm());
-    }
-    return total;
-  }
-
- private:
-  Mlp<Scalar> net_;
-  Mat A_, Y_;  // h x B, m x B
-};
-
+// BpFitness<double> (host, any thread count); the kernel is double only.
 template <typename Scalar>
 class BpFitness {
+  static_assert(std::is_same<Scalar, double>::value, "BpFitness: the host kernel is double only");
+
  public:
   using Map = typename NormalEquations<Scalar>::ConstMap;
+  static constexpr Index kBlock = 128;  // samples per kernel block (L1-resident)
 
-  // X: i x N, T: m x N (column = sample), kept by reference (caller-owned).
+  // X: i x N, T: m x N (column = sample). The constructor copies them once into a
+  // channel-contiguous (structure-of-arrays) layout, the kernel's; the caller's arrays are not
+  // kept.
   BpFitness(const Mlp<Scalar>& net, const Map& X, const Map& T, int threads = 2,
             Index max_batch = 64)
-      : net_(net), X_(X), T_(T), threads_(std::min(16, std::max(1, threads))) {
-    chunks_ = std::max<Index>(1, std::min<Index>(16, X.cols() / 256));
-    for (int t = 0; t < threads_; ++t) ne_.emplace_back(net_, 256);
+      : net_(net), n_(X.cols()), threads_(std::min(16, std::max(1, threads))) {
+    const Index i = X.rows(), m = T.rows();
+    xs_.resize(static_cast<size_t>(n_ * i));
+    ts_.resize(static_cast<size_t>(n_ * m));
+    for (Index s = 0; s < n_; ++s) {
+      for (Index l = 0; l < i; ++l) xs_[static_cast<size_t>(l * n_ + s)] = X(l, s);
+      for (Index k = 0; k < m; ++k) ts_[static_cast<size_t>(k * n_ + s)] = T(k, s);
+    }
+    chunks_ = std::max<Index>(1, std::min<Index>(16, n_ / 256));
+    work_.resize(static_cast<size_t>(threads_ * net_.hidden() * kBlock));
     parts_.resize(static_cast<size_t>(max_batch * chunks_));
+    try {
+      for (int t = 1; t < threads_; ++t) pool_.emplace_back(&BpFitness::worker, this, t);
+    } catch (...) {  // no thread left running if one cannot be started
+      stop_pool();
+      throw;
+    }
   }
 
   BpFitness(const BpFitness&) = delete;
@@ -118,6 +106,8 @@ class BpFitness {
   Index dim() const { return net_.num_params(); }
   int threads() const { return threads_; }
   Index chunks() const { return chunks_; }
+  // KernelPath::Generic forces the SSE2 build of the kernel (tests compare both paths).
+  void set_path(KernelPath p) { path_ = p; }
 
   Scalar operator()(const Scalar* theta) {
     Scalar f;
@@ -127,29 +117,25 @@ class BpFitness {
 
   // n individuals (column-major D x n) -> n MSE values.
   void batch(const Scalar* thetas, Index n, Scalar* out) {
-    const Index tasks = n * chunks_, D = dim();
+    const Index tasks = n * chunks_;
     if (static_cast<size_t>(tasks) > parts_.size()) parts_.resize(static_cast<size_t>(tasks));
-    const Index N = X_.cols();
-    auto work = [&](int t, int nt) {
-      for (Index q = t; q < tasks; q += nt) {
-        const Index ind = q / chunks_, c = q % chunks_;
-        const Index lo = N * c / chunks_, hi = N * (c + 1) / chunks_;
-        const Map Xc(X_.data() + lo * X_.rows(), X_.rows(), hi - lo);
-        const Map Tc(T_.data() + lo * T_.rows(), T_.rows(), hi - lo);
-        parts_[static_cast<size_t>(q)] = ne_[t].sse(thetas + ind * D, Xc, Tc);
-      }
-    };
-    const int nt = static_cast<int>(std::min<Index>(threads_, tasks));
-    if (nt <= 1 || N * n < 2048) {
-      work(0, 1);
+    job_thetas_ = thetas;
+    job_tasks_ = tasks;
+    next_.store(0, std::memory_order_relaxed);
+    if (pool_.empty() || tasks < 2 || n_ * n < 2048) {
+      drain(0);
     } else {
-      std::thread helpers[15];
-      const int extra = std::min(nt, 16) - 1;
-      for (int t = 1; t <= extra; ++t) helpers[t - 1] = std::thread(work, t, extra + 1);
-      work(0, extra + 1);
-      for (int t = 0; t < extra; ++t) helpers[t].join();
+      {
+        std::lock_guard<std::mutex> lk(mu_);
+        active_ = static_cast<int>(pool_.size());
+        ++generation_;
+      }
+      start_.notify_all();
+      drain(0);
+      std::unique_lock<std::mutex> lk(mu_);
+      done_.wait(lk, [this] { return active_ == 0; });
     }
-    const double nm = static_cast<double>(N * T_.rows());
+    const double nm = static_cast<double>(n_ * net_.outputs());
     for (Index ind = 0; ind < n; ++ind) {
       double sse = 0;
       for (Index c = 0; c < chunks_; ++c) sse += parts_[static_cast<size_t>(ind * chunks_ + c)];
@@ -157,13 +143,70 @@ class BpFitness {
     }
   }
 
+  ~BpFitness() { stop_pool(); }
+
  private:
+  void stop_pool() {
+    {
+      std::lock_guard<std::mutex> lk(mu_);
+      stop_ = true;
+    }
+    start_.notify_all();
+    for (auto& th : pool_) th.join();
+    pool_.clear();
+  }
+
+  // Takes (individual, chunk) tasks from the shared counter until none is left; the partial of
+  // task q always goes to parts_[q], whoever computes it.
+  void drain(int t) {
+    const Index D = dim();
+    for (;;) {
+      const Index q = next_.fetch_add(1, std::memory_order_relaxed);
+      if (q >= job_tasks_) return;
+      const Index ind = q / chunks_, c = q % chunks_;
+      const Index lo = n_ * c / chunks_, hi = n_ * (c + 1) / chunks_;
+      parts_[static_cast<size_t>(q)] = chunk_sse(job_thetas_ + ind * D, lo, hi, t);
+    }
+  }
+
+  void worker(int t) {
+    long seen = 0;
+    for (;;) {
+      {
+        std::unique_lock<std::mutex> lk(mu_);
+        start_.wait(lk, [&] { return stop_ || generation_ != seen; });
+        if (stop_) return;
+        seen = generation_;
+      }
+      drain(t);
+      std::lock_guard<std::mutex> lk(mu_);
+      if (--active_ == 0) done_.notify_one();
+    }
+  }
+
+  double chunk_sse(const Scalar* theta, Index lo, Index hi, int t) {
+    Scalar* a = work_.data() + static_cast<size_t>(t) * net_.hidden() * kBlock;
+    return sse_soa(net_, theta, xs_.data() + lo, ts_.data() + lo, n_, hi - lo, a, kBlock, path_);
+  }
+
   Mlp<Scalar> net_;
-  Map X_, T_;
+  Index n_;
   int threads_;
   Index chunks_;
-  std::vector<SseWorker<Scalar>> ne_;
+  KernelPath path_ = KernelPath::Auto;
+  std::vector<Scalar> xs_, ts_;  // N x i and N x m, channel-contiguous
+  std::vector<Scalar> work_;     // per thread: the hidden activations of a block (h kBlock)
   std::vector<double> parts_;
+  // the worker pool (threads - 1 threads started by the constructor, parked between batches)
+  std::vector<std::thread> pool_;
+  std::mutex mu_;
+  std::condition_variable start_, done_;
+  long generation_ = 0;
+  int active_ = 0;
+  bool stop_ = false;
+  const Scalar* job_thetas_ = nullptr;
+  Index job_tasks_ = 0;
+  std::atomic<Index> next_{0};
 };
 
 }  // namespace cdam::optim
