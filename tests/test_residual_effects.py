@@ -81,6 +81,20 @@ def test_two_effects_both_found():
     assert p["Fc_neg"] == pytest.approx(1.0, rel=0.2)
 
 
+@pytest.mark.parametrize("noise", [1.0, pytest.param(3.0, marks=pytest.mark.slow)])
+def test_coulomb_and_delay_both_found(noise):
+    # Coulomb 1.5 N + a 30 ms command delay on the rigid axis: exactly those two, each within
+    # 20 % of the generator's values
+    rec = rigid_axis_record(seed=2, noise=noise, Fc=1.5, delay=0.03)
+    sel = _run(rec, RIG, "rigid_axis")
+    keys = {s.candidate.effect.key: s.candidate.effect for s in sel.steps}
+    assert set(keys) == {"coulomb_friction@tau", "actuator_delay@tau"}, list(keys)
+    assert sel.removed == []
+    assert keys["actuator_delay@tau"].delay == pytest.approx(0.03, rel=0.2)
+    fc = keys["coulomb_friction@tau"].parameters(sel.final.theta, sel.model)["Fc"]
+    assert fc == pytest.approx(1.5, rel=0.2)
+
+
 def test_periodic_disturbance_is_unexplained():
     rec = rigid_axis_record(seed=4, periodic=(1.0, 7.0))
     sel = _run(rec, RIG, "rigid_axis")

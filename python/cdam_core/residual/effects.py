@@ -79,10 +79,28 @@ def _p(effect: Effect, name: str) -> str:
 
 @dataclass(frozen=True)
 class CoulombFriction(Effect):
-    """Dry friction ``Fc sign(v)`` on the channel's velocity (smoothed sign if ``eps`` > 0)."""
+    """Dry friction ``Fc sign(v)`` on the channel's velocity (smoothed sign if ``eps`` > 0).
+
+    With ``smooth`` (set by :func:`candidates` for models whose ``friction_width_search`` is
+    true: the flight models) the width ``eps`` of ``tanh(v / eps)`` is searched as a nonlinear
+    parameter in [0, 0.25 std(v)] (0: the plain sign). A plain sign on a friction that changes
+    sign over a finite velocity band (Stribeck, bristle compliance, the simulator's
+    ``Fc tanh(v / 0.05)``) fits the many slow samples badly and biases Fc low.
+    """
 
     eps: float = 0.0
+    smooth: bool = False
     name = "coulomb_friction"
+    edge_identified = True   # eps = 0 (a plain sign) at the edge of the search is a valid answer
+    search_grid = 7          # coarse grid, then a bounded 1-D search (selection._fit_with)
+
+    @property
+    def search(self):
+        return ("eps", 0.0, None) if self.smooth else None
+
+    def search_bounds(self, s, model):
+        v = np.asarray(s[model.viscous[self.channel][1]], dtype=float)
+        return 0.0, 0.25 * float(np.std(v))
 
     def applies_to(self, model) -> bool:
         return self.channel in model.viscous
@@ -90,6 +108,12 @@ class CoulombFriction(Effect):
     def regressors(self, s, model):
         v = s[model.viscous[self.channel][1]]
         return {self.channel: {_p(self, "Fc"): smooth_sign(v, self.eps)}}
+
+    def parameters(self, theta, model):
+        out = super().parameters(theta, model)
+        if not self.smooth:
+            out.pop("eps", None)
+        return out
 
 
 @dataclass(frozen=True)
@@ -392,8 +416,13 @@ def candidates(model, extra_columns=(), options: dict | None = None) -> list[Eff
     for name, cls in LIBRARY.items():
         if cls is ExternalForce:
             continue
+        kw = dict(options.get(name, {}))
         for ch in sorted(channels):
-            eff = cls(channel=ch, **options.get(name, {}))
+            # the tanh width is searched on clean equations only: in an errors-in-variables
+            # equation (flight link equations) a wide tanh fits the mismatch, not friction
+            smooth = (cls is CoulombFriction and getattr(model, "friction_width_search", False)
+                      and ch not in getattr(model, "eiv_equations", ()))
+            eff = cls(channel=ch, **({"smooth": True, **kw} if smooth else kw))
             if eff.applies_to(model):
                 out.append(eff)
     for col in extra_columns:

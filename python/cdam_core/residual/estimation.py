@@ -2,7 +2,13 @@
 
 Estimation: stack every equation's rows ``y = Phi theta`` over the record (the first and last
 ``trim`` samples, where the zero-phase filter and the differences have edge effects, are left
-out), move fixed parameters to the left side, solve with ``numpy.linalg.lstsq``.
+out), move fixed parameters to the left side, solve with ``numpy.linalg.lstsq``. Weighted
+(IDIM-WLS, Gautier): when the prepared signals hold ``_eq_weights`` (``{equation: w}``, set by
+:func:`set_equation_weights` as 1 / the RMS of each equation's ordinary least-squares
+residual), each equation's rows are multiplied by its weight, so a noisy equation (the link
+equations of the flight model, whose body accelerations are twice-differentiated position
+noise) does not bias the parameters it shares with a clean one (the cable stiffness in the
+motor equation). The residuals stay in physical units; :attr:`Fit.sse` is the weighted sum.
 Free run: integrate the same equations forward from the measured inputs alone (semi-implicit
 Euler, ``substeps`` per sample chosen so that h * |lambda|max <= 0.5 for the linearised model).
 """
@@ -79,10 +85,23 @@ class Fit:
     keep: slice
     cond: float
     columns: dict = field(default_factory=dict)   # equation -> estimated parameters in it
+    weights: dict = field(default_factory=dict)   # equation -> WLS weight (missing: 1)
+
+    def wsse(self, equations=None) -> float:
+        """Weighted sum of squared residuals over ``equations`` (default: all)."""
+        eqs = self.residuals if equations is None else equations
+        return float(sum(self.weights.get(e, 1.0) ** 2 * np.sum(self.residuals[e] ** 2)
+                         for e in eqs))
+
+    def wref(self, equations=None) -> float:
+        """Weighted sum of squares of the reference signals over ``equations``."""
+        eqs = self.references if equations is None else equations
+        return float(sum(self.weights.get(e, 1.0) ** 2 * np.sum(self.references[e] ** 2)
+                         for e in eqs))
 
     @property
     def sse(self) -> float:
-        return float(sum(np.sum(r ** 2) for r in self.residuals.values()))
+        return self.wsse()
 
     @property
     def n_rows(self) -> int:
@@ -147,6 +166,9 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None)
         names += [p for p in cols if p not in names]
     est = [p for p in names if p not in model.fixed]
     sigs = s.get("_signatures")
+    weights = dict(sig.get("_eq_weights") or {})
+    if base is not None and base.weights != weights:
+        base = None
     bsigs = base.signals.get("_signatures") if base is not None else None
     # Normal equations per block, assembled equation by equation (each equation holds only
     # its own columns), formed with einsum (single-threaded: on a busy machine a threaded BLAS
@@ -181,8 +203,9 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None)
             if not (np.all(np.isfinite(X)) and np.all(np.isfinite(y))):
                 raise ValueError("signals: the regressors contain NaN or Inf")
             ix = np.array([index[p] for p in ps], dtype=int)
-            A[np.ix_(ix, ix)] += np.einsum("ij,ik->jk", X, X)
-            b[ix] += np.einsum("ij,i->j", X, y)
+            w2 = weights.get(eq, 1.0) ** 2
+            A[np.ix_(ix, ix)] += w2 * np.einsum("ij,ik->jk", X, X)
+            b[ix] += w2 * np.einsum("ij,i->j", X, y)
             blocks.append((eq, y, X, ix))
         scale = np.sqrt(np.diag(A)).copy()
         scale[scale == 0] = 1.0
@@ -199,7 +222,24 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None)
     resid = {eq: resid[eq] for eq in eqs}
     refs = {eq: _reference(model, eq, s, theta, eqs[eq][0], n, keep) for eq in eqs}
     return Fit(model, effects, theta, est, resid, refs, s, keep, max(conds) if conds else 1.0,
-               {eq: [p for p in cols if p in est] for eq, (_, cols) in eqs.items()})
+               {eq: [p for p in cols if p in est] for eq, (_, cols) in eqs.items()}, weights)
+
+
+def set_equation_weights(sig: dict, fitted: Fit) -> dict:
+    """Store IDIM-WLS weights in the prepared signals ``sig``: each equation's weight is
+    1 / the RMS of its residual in ``fitted`` (scaled so the largest weight is 1); later
+    :func:`fit` calls on ``sig`` use them. Returns the weights."""
+    rms = {eq: float(np.sqrt(np.mean(r ** 2))) for eq, r in fitted.residuals.items()}
+    pos = [v for v in rms.values() if v > 0]
+    floor = min(pos) if pos else 1.0
+    w = {eq: floor / max(v, floor) for eq, v in rms.items()}
+    # errors-in-variables equations (regressors built from noisy twice-differentiated signals)
+    # get a further factor: parameters they share with clean equations come from the clean ones
+    for eq in getattr(fitted.model, "eiv_equations", ()):
+        if eq in w:
+            w[eq] *= float(getattr(fitted.model, "eiv_weight", 1.0))
+    sig["_eq_weights"] = w
+    return w
 
 
 # ----------------------------------------------------------------------------------------
@@ -359,4 +399,4 @@ def apply_fit(fitted: Fit, sig: dict, trim: int | None = None) -> Fit:
         resid[eq] = (np.broadcast_to(np.asarray(y, dtype=float), (n,)) - pred)[keep]
         refs[eq] = _reference(model, eq, s, fitted.theta, y, n, keep)
     return Fit(model, fitted.effects, dict(fitted.theta), list(fitted.estimated), resid, refs, s,
-               keep, fitted.cond, dict(fitted.columns))
+               keep, fitted.cond, dict(fitted.columns), dict(fitted.weights))

@@ -21,7 +21,7 @@ import numpy as np
 from scipy import optimize, stats
 
 from . import diagnostics as dg
-from .estimation import Fit, fit, free_run_error
+from .estimation import Fit, fit, free_run_error, set_equation_weights
 
 
 @dataclass
@@ -85,7 +85,7 @@ def _fit_with(model, sig, effects, eff, trim, base=None):
     lo, hi = eff.search_bounds(sig, model)
     if not hi > lo:
         return eff, fit(model, sig, effects + (eff,), trim, base)
-    grid = np.linspace(lo, hi, 13)
+    grid = np.linspace(lo, hi, int(getattr(eff, "search_grid", 13)))
     sse = [fit(model, sig, effects + (eff.with_value(x),), trim, base).sse for x in grid]
     i = int(np.argmin(sse))
     a, b = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
@@ -103,8 +103,8 @@ def _changed_equations(current: Fit, f1: Fit, eff, model) -> list:
     out = []
     touched = set(eff.regressors(f1.signals, model)) if not eff.search else set()
     for eq, r1 in f1.residuals.items():
-        s0 = float(np.sum(current.residuals[eq] ** 2))
-        s1 = float(np.sum(r1 ** 2))
+        s0 = current.wsse([eq])
+        s1 = f1.wsse([eq])
         if eq in touched or eq == eff.channel or abs(s1 - s0) > 1e-3 * max(s0, 1e-300):
             out.append(eq)
     return out or list(f1.residuals)
@@ -116,9 +116,7 @@ def compare(model, sig, current: Fit, f1: Fit, eff, alpha: float = 0.01,
     ERR, an F-test on the effective sample size and BIC on it (module docstring)."""
     eqs = _changed_equations(current, f1, eff, model)
     p = max(1, f1.k - current.k + (1 if eff.search else 0))
-    sse0 = sum(float(np.sum(current.residuals[e] ** 2)) for e in eqs)
-    sse1 = sum(float(np.sum(f1.residuals[e] ** 2)) for e in eqs)
-    yty = sum(float(np.sum(current.references[e] ** 2)) for e in eqs)
+    sse0, sse1, yty = current.wsse(eqs), f1.wsse(eqs), current.wref(eqs)
     tau = max(dg.effective_sample_size(f1.residuals[e])["tau_int"] for e in eqs)
     n_rows = sum(f1.residuals[e].size for e in eqs)
     n_eff = n_rows / tau
@@ -133,12 +131,16 @@ def compare(model, sig, current: Fit, f1: Fit, eff, alpha: float = 0.01,
     if eff.search is not None:  # an optimum on the edge of the search range is not identified
         lo, hi = eff.search_bounds(sig, model)
         x = getattr(eff, eff.search[0])
-        if hi > lo and min(x - lo, hi - x) <= 0.01 * (hi - lo):
+        if (hi > lo and min(x - lo, hi - x) <= 0.01 * (hi - lo)
+                and not getattr(eff, "edge_identified", False)):
             pval, dbic = 1.0, float("inf")
     c = Candidate(eff, f1, p, gain / yty if yty > 0 else 0.0, float(f_stat), pval, float(dbic),
                   float(n_eff), float(tau))
     c._alpha = alpha
     c.gain = gain / sse0 if sse0 > 0 else 0.0
+    eiv = set(getattr(model, "eiv_equations", ()))
+    if eiv and set(eqs) <= eiv:   # only errors-in-variables equations: see eiv_min_gain
+        min_gain = max(min_gain, float(getattr(model, "eiv_min_gain", min_gain)))
     c._min_gain = min_gain
     c.equations = eqs
     return c
@@ -235,9 +237,13 @@ def select(model, sig: dict, candidates, alpha: float = 0.01, max_steps: int | N
     candidates = [c for c in candidates if c.key not in dkeys]
     sig_fr = validation if validation is not None else sig
     store: dict = {}
+    sig.pop("_eq_weights", None)
     declared = fit(model, sig, (), trim)
     for e in declared_effects:   # searched parameters of declared effects are searched once
         e2, declared = _fit_with(model, sig, declared.effects, e, trim)
+    if getattr(model, "weighted", False):   # IDIM-WLS: weights from the declared OLS residual
+        set_equation_weights(sig, declared)
+        declared = fit(model, sig, declared.effects, trim)
     current = declared
     err_current = _errors(declared, sig_fr, free_run, substeps, store, "declared")
     declared_error = dict(err_current)
