@@ -48,9 +48,15 @@ def _tables(md_text):
     return tables
 
 
+MODE_LABEL = {"one_step": "one-step", "free_run": "free-run", "k_step_0.1s": "k-step 0.1 s"}
+SECTION_MODES = {"static": ("one_step",),
+                 "narx": ("one_step", "k_step_0.1s", "free_run"),
+                 "hybrid": ("one_step", "k_step_0.1s", "free_run")}
+
+
 def _table(tables, section, rec, mode):
     key = next(k for k in tables if k.startswith(f"{section}: Table {2 if rec == 'test' else 3}")
-               and k.endswith(f"{mode.replace('_', '-')}: Pearson r"))
+               and k.endswith(f"{MODE_LABEL[mode]}: Pearson r"))
     return tables[key]
 
 
@@ -79,8 +85,8 @@ def test_writes_every_promised_file(run):
 def test_tables_hold_the_published_values(run):
     out, res = run
     tables = _tables((out / "index.md").read_text())
-    for section in ("static", "narx"):
-        modes = ("one_step",) if section == "static" else ("one_step", "free_run")
+    assert set(res["tables"]) == set(SECTION_MODES)
+    for section, modes in SECTION_MODES.items():
         for rec, paper in (("test", PAPER_T2), ("validation", PAPER_T3)):
             for mode in modes:
                 rows = _table(tables, section, rec, mode)
@@ -244,3 +250,152 @@ def test_same_seed_same_section():
     assert a["summary"]["iboa"]["records"] == b["summary"]["iboa"]["records"]
     for k in pa:
         np.testing.assert_array_equal(pa[k], pb[k])
+
+
+def test_verdict_names_exactly_the_models_that_reach_the_paper(run):
+    out, res = run
+    md = (out / "index.md").read_text()
+    for o in PAPER_T2:
+        line = next(l for l in md.splitlines() if l.startswith(f"- **{o}**:"))
+        for rec, table in (("test", "Table 2"), ("validation", "Table 3")):
+            part = line.split(f"{table}: ")[1].split(";")[0].rstrip(".")
+            expect = []
+            for section, modes in SECTION_MODES.items():
+                for mode in modes:
+                    vals = [np.mean([r["metrics"][rec][mode][o]["r"] for r in a["runs"]])
+                            for a in (res["sections"][section]["algorithms"][x] for x in ALGOS)]
+                    paper = (PAPER_T2 if rec == "test" else PAPER_T3)[o]
+                    if all(round(v, 4) >= p for v, p in zip(vals, paper)):
+                        name = {"static": "static", "narx": "NARX net",
+                                "hybrid": "hybrid"}[section]
+                        expect.append(f"{name} {MODE_LABEL[mode]}")
+            assert part == (", ".join(expect) if expect else "no model"), (o, table)
+
+
+def test_hybrid_structure_is_chosen_on_training_data_and_reported(run):
+    out, res = run
+    sec = res["sections"]["hybrid"]
+    st = sec["structure"]
+    rs = [c["training_tail_free_run_r"] for c in st["candidates"]]
+    assert rs == sorted(rs, reverse=True) and st["training_tail_free_run_r"] == rs[0]
+    assert st["narx"] == st["candidates"][0]["narx"] == sec["config"]["narx"]
+    assert sec["config"]["model"] == "hybrid"
+    for a in ALGOS:
+        for r in sec["algorithms"][a]["runs"]:
+            w = r["residual_weight"]
+            tail = r["training_tail_free_run_r"]
+            assert w == (1.0 if tail["1.0"] > tail["0.0"] else 0.0)
+    assert f"orders (na, nb, nk) = {tuple(st['narx'])}" in (out / "index.md").read_text()
+
+
+def test_k_step_measured_arrays_drop_t0_plus_k_minus_one_per_segment(run):
+    out, res = run
+    npz = np.load(out / "predictions.npz")
+    k = 10                                           # 0.1 s at 100 Hz
+    for section in ("narx", "hybrid"):
+        t0 = res["predictions"]["t0"][section]
+        one = npz[f"{section}/validation/one_step/measured"]
+        ks = npz[f"{section}/validation/k_step_0.1s/measured"]
+        n = len(one) // 2                            # two equal validation segments
+        np.testing.assert_array_equal(ks, np.vstack([one[k - 1:n], one[n + k - 1:]]))
+        assert len(ks) == len(one) - 2 * (k - 1) and t0 >= 0
+
+
+class _LinearArx:
+    """y(t) = a1 y(t-1) + a2 y(t-2) + b u(t-1): a model with a one-step predictor only."""
+    narx, t0 = (2, 1, 1), 2
+
+    def __init__(self, a1, a2, b):
+        self.a1, self.a2, self.b = a1, a2, b
+
+    def predict(self, U, Y, mode="one_step"):
+        assert mode == "one_step"
+        P = Y.copy()
+        P[2:] = self.a1 * Y[1:-1] + self.a2 * Y[:-2] + self.b * U[1:-1, :1]
+        return P
+
+
+def test_k_step_prediction_against_an_explicit_simulation():
+    from cdam_core.paper.kstep import horizon_steps, k_step_predict
+    g = np.random.default_rng(1)
+    U, Y = g.normal(size=(40, 1)), g.normal(size=(40, 1))
+    model = _LinearArx(1.5, -0.6, 0.3)
+    for k in (1, 3, 7):
+        P = k_step_predict(model, U, Y, k)
+        for t in range(2 + k - 1, 40):              # simulate from the measured y(..t-k)
+            z = list(Y[t - k - 1:t - k + 1, 0])     # y(t-k-1), y(t-k)
+            for s in range(t - k + 1, t + 1):
+                z.append(1.5 * z[-1] - 0.6 * z[-2] + 0.3 * U[s - 1, 0])
+            assert P[t, 0] == pytest.approx(z[-1], rel=1e-12, abs=1e-12)
+        np.testing.assert_array_equal(P[:2 + k - 1], Y[:2 + k - 1])
+    np.testing.assert_array_equal(k_step_predict(model, U, Y, 1), model.predict(U, Y))
+    assert horizon_steps(0.1, 200.0) == 20 and horizon_steps(0.5, 1000.0) == 500
+    with pytest.raises(ValueError, match="horizon_s"):
+        horizon_steps(0.001, 200.0)
+    with pytest.raises(ValueError, match="k"):
+        k_step_predict(model, U, Y, 0)
+    with pytest.raises(ValueError, match="U, Y"):
+        k_step_predict(model, U[:5], Y, 2)
+    with pytest.raises(ValueError, match="NaN"):
+        k_step_predict(model, U, np.full_like(Y, np.nan), 2)
+    with pytest.raises(ValueError, match="dynamic"):
+        k_step_predict(type("Static", (), {"narx": None})(), U, Y, 2)
+
+
+def test_bad_horizon_is_rejected(tmp_path, capsys):
+    from cdam_core.paper import PaperConfig
+    with pytest.raises(ValueError, match="horizon_s"):
+        PaperConfig(horizons=(0.001,))
+    with pytest.raises(ValueError, match="horizon_s"):
+        PaperConfig(horizons=(float("nan"),))
+    assert main(["paper", "--out", str(tmp_path / "h"), "--horizon", "-1", "--quiet"]) == 2
+    assert "horizon" in capsys.readouterr().err
+
+
+def test_persistence_baseline_from_the_records(run):
+    """Independent: savgol passes + decimate on the saved test CSVs, then corrcoef of y(t)
+    against y(t - k) per output, segments pooled."""
+    out, res = run
+    npz = np.load(out / "predictions.npz")
+
+    def prep(name):
+        ds = read_dataset(out / name)
+        Y = ds.select(ds.outputs)
+        for _ in range(3):
+            Y = savgol_filter(Y, 5, 3, mode="interp", axis=0)
+        return decimate(Y, 10, ftype="fir", axis=0, zero_phase=True)
+
+    segs = [y[len(y) // 2:] for y in (prep("flight_i.csv"), prep("flight_ii.csv"))]
+    for mode, k in (("one_step", 1), ("k_step_0.1s", 10)):
+        Ym = np.vstack([s[k:] for s in segs])
+        Pm = np.vstack([s[:-k] for s in segs])
+        np.testing.assert_allclose(npz[f"persistence/test/{mode}/measured"], Ym, atol=1e-9)
+        np.testing.assert_allclose(npz[f"persistence/test/{mode}/predicted"], Pm, atol=1e-9)
+        for j, o in enumerate(res["sections"]["static"]["outputs"]):
+            r_np = np.corrcoef(Ym[:, j], Pm[:, j])[0, 1]
+            assert res["persistence"]["test"][mode][o]["r"] == pytest.approx(r_np, abs=1e-9)
+    with pytest.raises(ValueError, match="segments"):
+        from cdam_core.paper.baseline import persistence
+        persistence([], ["a"], 100.0)
+
+
+def test_above_persistence_lists_match_the_runs(run):
+    out, res = run
+    md = (out / "index.md").read_text()
+    names = {"narx": "NARX net", "hybrid": "hybrid"}
+    for section in ("narx", "hybrid"):
+        for rec, table in (("test", "Table 2"), ("validation", "Table 3")):
+            for mode in ("one_step", "k_step_0.1s"):
+                runs = res["sections"][section]["algorithms"]["iboa"]["runs"]
+                base = res["persistence"][rec][mode]
+                mean = {o: np.mean([r["metrics"][rec][mode][o]["r"] for r in runs])
+                        for o in PAPER_T2}
+                above = [o for o in PAPER_T2 if mean[o] > base[o]["r"]]
+                head = f"- {names[section]}, {MODE_LABEL[mode]}: reaches {table}"
+                line = next(l for l in md.splitlines() if l.startswith(head))
+                tail = line.split(f"above persistence {MODE_LABEL[mode]} on ")[1]
+                assert tail.startswith(f"{len(above)} of 8")
+                if above:
+                    assert tail.endswith(f"({', '.join(above)}).")
+    assert "- static, one-step: reaches Table 2 on" in md and "static, one-step: reaches " \
+        "Table 2 on 0 of 8 outputs; IBOA" not in md

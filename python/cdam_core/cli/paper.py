@@ -8,7 +8,8 @@ def register(subparsers) -> None:
     p = subparsers.add_parser(
         "paper", help="reproduce the paper's Tables 2 and 3 and Figs. 8-15 on simulated flights",
         description="Simulate experiments (i) and (ii) and their validation records, identify with "
-                    "IBOA-BP, BOA-BP and CABC-BP (static map, then NARX), and write index.md/html, "
+                    "IBOA-BP, BOA-BP and CABC-BP (static map, NARX network, hybrid ARX + "
+                    "network), and write index.md/html, "
                     "results.json, predictions.npz, figures and the records into --out.")
     p.add_argument("--seeds", type=int, default=4,
                    help="identification seeds per algorithm (default 4: the fewest for which a "
@@ -21,6 +22,11 @@ def register(subparsers) -> None:
                    help="five-point smoothing passes (default 5)")
     p.add_argument("--narx", default="2,2,1",
                    help="NARX orders na,nb,nk of the second section, or 'none' (default 2,2,1)")
+    p.add_argument("--no-hybrid", action="store_true",
+                   help="skip the third section (hybrid linear ARX + network on its residual)")
+    p.add_argument("--horizon", type=float, action="append", default=None, metavar="SECONDS",
+                   help="k-step-ahead prediction horizon of the dynamic sections (repeatable; "
+                        "default 0.1)")
     p.add_argument("--flight-seed", type=int, default=0, help="seed of the simulated flights")
     p.add_argument("--duration", type=float, default=20.0,
                    help="seconds per experiment record (validation records: half; default 20)")
@@ -50,6 +56,7 @@ def run(args) -> int:
     import sys
 
     from cdam_core.paper import PaperConfig, check_out_dir, run_paper
+    from cdam_core.paper.tables import mode_label
 
     if args.seeds < 1:
         raise CliError(f"--seeds: must be >= 1, got {args.seeds}")
@@ -68,7 +75,9 @@ def run(args) -> int:
         cfg = PaperConfig(seeds=args.seeds, flight_seed=args.flight_seed, duration=args.duration,
                           rate=args.rate, smoothing=args.smoothing, hidden=args.hidden,
                           population=args.population, iterations=args.iterations,
-                          lm_epochs=args.epochs, narx=_narx(args.narx), effects=list(args.effect))
+                          lm_epochs=args.epochs, narx=_narx(args.narx), effects=list(args.effect),
+                          hybrid=not args.no_hybrid,
+                          horizons=tuple(args.horizon) if args.horizon else (0.1,))
     except ValueError as exc:
         raise CliError(str(exc)) from None
     result = run_paper(cfg, args.out, progress=not args.quiet)
@@ -80,7 +89,7 @@ def run(args) -> int:
             for sec, t in result["tables"].items():
                 for mode, rows in t["r"][rec].items():
                     m = rows[o][algo]["mean"]
-                    cells.append(f"{sec} {mode.replace('_', '-')} "
+                    cells.append(f"{sec} {mode_label(mode)} "
                                  f"{'n/a' if m is None else format(m, '.4f')} "
                                  f"{'yes' if flags[f'{sec}/{rec}/{mode}'] else 'no'}")
             paper = result["published"]["table2" if rec == "test" else "table3"][o][algo]

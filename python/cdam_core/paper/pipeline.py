@@ -2,8 +2,10 @@
 
 Steps: simulate experiments (i) and (ii) and their validation records (:mod:`.records`); smooth
 at 1 kHz and decimate to the training rate; identify with IBOA-BP, BOA-BP and CABC-BP over the
-seeds as a static input-to-output map (the paper's network) and, in a second section, as a NARX
-model (:mod:`.runner`); write the records (CSV + JSON sidecar), predictions.npz, results.json,
+seeds as a static input-to-output map (the paper's network), in a second section as a NARX
+network and in a third as the hybrid ARX + network model (:mod:`.runner`), scored one-step,
+k-step-ahead (:mod:`.kstep`) and free-run, beside the persistence baseline (:mod:`.baseline`);
+write the records (CSV + JSON sidecar), predictions.npz, results.json,
 the figures (:mod:`.figures`) and index.md / index.html.
 """
 from __future__ import annotations
@@ -18,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from . import figures
+from .baseline import persistence
 from .index import write_index
 from .published import FITNESS, OUTPUTS, RUN_TIME_S, TABLE2, TABLE3
 from .records import DATA_DESIGN, prepare_data, simulate_records, smoothed
@@ -27,6 +30,7 @@ from .tables import paper_tables, reach_summary
 
 __all__ = ["run_paper", "check_out_dir"]
 
+_SECTION_NAME = {"narx": "NARX", "hybrid": "hybrid ARX + network"}
 RECORD_FILES = {"exp_i": "flight_i.csv", "exp_ii": "flight_ii.csv",
                 "val_i": "validation_i.csv", "val_ii": "validation_ii.csv"}
 
@@ -107,8 +111,9 @@ def _figures(d, records, data, sections, preds, best_seeds, smoothing):
                 for part, names in (("quadrotor", figures.QUADROTOR),
                                     ("manipulator", figures.MANIPULATOR)):
                     n = number[(rec, part)]
-                    suffix = "" if label == "static" else f"_narx_{mode}"
-                    kind = "" if label == "static" else f" (NARX {mode.replace('_', '-')})"
+                    suffix = "" if label == "static" else f"_{label}_{mode}"
+                    kind = ("" if label == "static"
+                            else f" ({_SECTION_NAME[label]} {mode.replace('_', '-')})")
                     fname = f"fig{n}_{rec}_{part}{suffix}.png"
                     figures.identified_figure(
                         meas, pred, data.outputs, names, data.rate, seams, d / fname,
@@ -125,7 +130,8 @@ def run_paper(config: PaperConfig | None = None, out="paper_out", *, progress: b
     d = check_out_dir(out)
     t_start = time.perf_counter()
     load_start = os.getloadavg()[0]
-    sections_to_run = [("static", None)] + ([("narx", cfg.narx)] if cfg.narx else [])
+    sections_to_run = ([("static", None, "bp")] + ([("narx", cfg.narx, "bp")] if cfg.narx else [])
+                       + ([("hybrid", None, "hybrid")] if cfg.hybrid else []))
     bar = _bar(2 + len(sections_to_run) * len(cfg.algos) * cfg.seeds, progress)
     bar.set_postfix_str("simulating flights (i), (ii) and validation records")
     t0 = time.perf_counter()
@@ -134,12 +140,19 @@ def run_paper(config: PaperConfig | None = None, out="paper_out", *, progress: b
     t_sim = time.perf_counter() - t0
     bar.update()
     sections, preds, best_seeds, seconds = {}, {}, {}, {"simulate_and_preprocess": t_sim}
-    for label, narx in sections_to_run:
-        res, p, _ = run_section(data, cfg, narx, bar=bar, label=label)
+    for label, narx, model in sections_to_run:
+        res, p, _ = run_section(data, cfg, narx, bar=bar, label=label, model=model)
         sections[label] = res
         preds.update(p)
         best_seeds[label] = {a: v["best_seed"] for a, v in res["algorithms"].items()}
         seconds[label] = res["seconds"]
+    baseline = {}
+    for rec, segs in (("test", data.test), ("validation", data.validation)):
+        m, arr = persistence(segs, data.outputs, data.rate, cfg.horizons)
+        baseline[rec] = m
+        for mode, (Ym, Pm) in arr.items():
+            preds[f"persistence/{rec}/{mode}/measured"] = Ym
+            preds[f"persistence/{rec}/{mode}/predicted"] = Pm
     bar.set_postfix_str("writing records, figures and index")
     t0 = time.perf_counter()
     files = {"records": []}
@@ -164,13 +177,15 @@ def run_paper(config: PaperConfig | None = None, out="paper_out", *, progress: b
                       "run_time_s": RUN_TIME_S, "outputs_order": list(OUTPUTS)},
         "tables": tables,
         "reach": reach_summary(tables),
+        "persistence": baseline,
         "rank_sum": {label: sec["rank_sum"] for label, sec in sections.items()},
         "sections": sections,
         "predictions": {"file": "predictions.npz",
                         "t0": {label: sec["t0"] for label, sec in sections.items()},
                         "keys": "SECTION/RECORD/MODE/measured and SECTION/RECORD/MODE/ALGO/seedS;"
                                 " the arrays the metrics were computed on (each segment's first "
-                                "t0 samples dropped, segments pooled)"},
+                                "t0 samples dropped, segments pooled); persistence/RECORD/MODE/"
+                                "measured and .../predicted for the baseline y(t) = y(t - k)"},
         "files": files,
     }
     seconds["report"] = time.perf_counter() - t0

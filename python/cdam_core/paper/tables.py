@@ -11,11 +11,18 @@ from __future__ import annotations
 
 from .published import FITNESS, LABEL, OUTPUTS, RUN_TIME_S, TABLE2, TABLE3
 
-__all__ = ["paper_tables", "markdown_tables", "fmt_pm", "reach_summary"]
+__all__ = ["paper_tables", "markdown_tables", "fmt_pm", "reach_summary", "mode_label"]
 
 _PUBLISHED = {"test": TABLE2, "validation": TABLE3}
 _TABLE_NAME = {"test": "Table 2 (test: last half of each experiment)",
                "validation": "Table 3 (validation records)"}
+
+
+def mode_label(mode: str) -> str:
+    """'one_step' -> 'one-step', 'free_run' -> 'free-run', 'k_step_0.1s' -> 'k-step 0.1 s'."""
+    if mode.startswith("k_step_") and mode.endswith("s"):
+        return f"k-step {mode[len('k_step_'):-1]} s"
+    return mode.replace("_", "-")
 
 
 def fmt_pm(mean, std, digits=4) -> str:
@@ -85,7 +92,7 @@ def markdown_tables(tables: dict, *, title_prefix: str = "") -> list[str]:
                      f"{fmt_pm(ot['mean'], ot['std'], 2)} |")
     for rec, modes in tables["r"].items():
         for mode, rows in modes.items():
-            lines += ["", f"### {title_prefix}{_TABLE_NAME[rec]}, {mode.replace('_', '-')}: "
+            lines += ["", f"### {title_prefix}{_TABLE_NAME[rec]}, {mode_label(mode)}: "
                           "Pearson r", "",
                       "| output | " + " | ".join(f"{LABEL[a]} (ours) | {LABEL[a]} (paper)"
                                                   for a in algos) + " | reaches the paper |",
