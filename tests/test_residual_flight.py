@@ -119,24 +119,39 @@ ROTOR = {"T", "tau_phi", "tau_theta", "tau_psi"}
 @pytest.mark.slow
 @pytest.mark.parametrize("noise", [1.0, 3.0])
 def test_rotor_delay_found_on_the_moment_equations(noise):
-    # A 20 ms delay of all four rotor commands shifts T and the three moments alike. Each
-    # claim must be an actuator delay on a rotor command, and the roll and pitch moments (the
-    # fast attitude loops) must carry it within 20 % with >= 80 % of their excess removed.
-    # Weaker on purpose: yaw (a 0.5 Hz loop: the delay is collinear with Jz and Kpsi within
-    # the 2 Hz band) comes out at about 43 ms, so tau_psi's value is not asserted.
+    # A 20 ms delay of all four rotor commands: one shared delay (channel "rotors"), searched
+    # jointly on T's equations and the three moments, is the only claim, within 20 %, and it
+    # removes >= 80 % of the excess error over the rotor equations (excess per equation
+    # relative to its clean error, summed), and >= 80 % on each equation with a real excess
+    # (> 5 % of its clean error) except yaw. Yaw keeps part of its excess at the true delay
+    # (measured 61 % / 53 % removed at 1x / 3x): on the clean record the yaw equation alone
+    # already prefers a ~20 ms shift (an unmodelled rotor lag the 0.5 Hz yaw loop cannot
+    # separate from Jz and Kpsi), which is why yaw alone used to claim ~43 ms; it must still
+    # improve.
     spec = "actuator_delay:joint=0,rotor=0.02"
     sel = _analyse((spec,), 1, noise)
     clean = _analyse((), 1, noise).declared_error
     final = sel.final.equation_error()
-    found = {s.candidate.effect.channel: s for s in sel.steps}
-    assert all(s.candidate.effect.name == "actuator_delay" for s in sel.steps)
-    assert set(found) <= ROTOR and {"tau_phi", "tau_theta"} <= set(found), list(found)
-    for ch in ("tau_phi", "tau_theta"):
-        est = found[ch].candidate.effect.delay
-        assert est == pytest.approx(0.02, rel=0.2), (ch, est)
-        before = sel.declared_error[ch]["rmse"]
-        excess = before - clean[ch]["rmse"]
-        assert before - final[ch]["rmse"] >= 0.8 * excess, (ch, before, final[ch], excess)
+    found = [(s.candidate.effect.name, s.candidate.effect.channel) for s in sel.steps]
+    assert found == [("actuator_delay", "rotors")] and sel.removed == [], found
+    eff = sel.steps[0].candidate.effect
+    assert set(eff.commands) == ROTOR
+    assert eff.parameters(sel.final.theta, sel.model)["delay"] == pytest.approx(0.02, rel=0.2)
+    assert sel.steps[0].evidence["p_value"] < 0.01
+    excess_sum = removed_sum = 0.0
+    for ch in ("X", "Y", "Z", "tau_phi", "tau_theta", "tau_psi"):   # T enters X, Y, Z
+        before, after, ref = (sel.declared_error[ch]["rmse"], final[ch]["rmse"],
+                              clean[ch]["rmse"])
+        excess = before - ref
+        if excess <= 0.05 * ref:   # noise dominates: the significance test decided
+            continue
+        excess_sum += excess / ref
+        removed_sum += (before - after) / ref
+        if ch == "tau_psi":
+            assert after < before, (ch, before, after)
+        else:
+            assert before - after >= 0.8 * excess, (ch, before, after, excess)
+    assert removed_sum >= 0.8 * excess_sum, (removed_sum, excess_sum)
 
 
 @pytest.mark.slow

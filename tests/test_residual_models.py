@@ -96,3 +96,23 @@ def test_candidates_apply_per_model():
     assert "payload_mass" not in flx and "ground_effect" not in flx
     fixed = get_model("flexible_joint", fixed={"I": 0.05, "G": 0.8})
     assert "payload_mass" in {e.name for e in candidates(fixed)}
+
+
+@pytest.mark.parametrize("name", ["quadrotor", "aerial_manipulator"])
+def test_rotor_commands_share_one_delay_candidate(name):
+    # the four rotor commands get one joint delay (channel "rotors"), the joints their own
+    m = get_model(name)
+    delays = [e for e in candidates(m) if e.name == "actuator_delay"]
+    rotors = [e for e in delays if e.channel == "rotors"]
+    assert len(rotors) == 1 and set(rotors[0].commands) == {"T", "tau_phi", "tau_theta", "tau_psi"}
+    per = {e.channel for e in delays if e.channel != "rotors"}
+    assert per == ({"tau_m1", "tau_m2"} if name == "aerial_manipulator" else set())
+    # every command shifted by the same delay: sin(w (t - d)) in closed form
+    t = np.arange(0, 2, 0.01)
+    w, d = 2 * np.pi * 0.7, 0.02
+    s = {"t": t, **{c: (k + 1) * np.sin(w * t) for k, c in enumerate(rotors[0].commands)}}
+    out = rotors[0].with_value(d).transform_inputs(s, m)
+    inner = t >= d
+    for k, c in enumerate(rotors[0].commands):
+        assert np.allclose(out[c][inner], (k + 1) * np.sin(w * (t[inner] - d)), atol=2e-3)
+    assert rotors[0].with_value(d).parameters({}, m)["delay"] == d

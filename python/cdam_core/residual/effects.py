@@ -65,6 +65,10 @@ class Effect:
             out[self.search[0]] = float(getattr(self, self.search[0]))
         return out
 
+    def display_equation(self, equations) -> str:
+        """The equation (of ``equations``) on which the report shows the effect."""
+        return self.channel if self.channel in equations else next(iter(equations))
+
     def regressor_signal(self, s: dict, model) -> np.ndarray:
         """One signal that shows the effect against the residual (for the report)."""
         cols = self.regressors(s, model).get(self.channel, {})
@@ -201,15 +205,35 @@ class HardeningStiffness(Effect):
 
 @dataclass(frozen=True)
 class ActuatorDelay(Effect):
-    """The actuator applies the command ``delay`` seconds late: u(t) -> u(t - delay)."""
+    """The actuator applies the command ``delay`` seconds late: u(t) -> u(t - delay).
+
+    ``channels``: commands that share one delay (the model's ``shared_delays``, e.g. the four
+    rotor commands T, tau_phi, tau_theta, tau_psi of the flight models, channel ``"rotors"``):
+    all are shifted alike and the delay is searched jointly on the summed (weighted) residual
+    of every equation they enter, with the other parameters re-estimated at each candidate
+    delay. On its own a slow loop (yaw, about 0.5 Hz) cannot separate a delay from its inertia
+    and damping inside the 2 Hz band; shared with the fast loops it is pinned by them.
+    """
 
     delay: float = 0.0
     max_delay: float = 0.05
+    channels: tuple = ()
     name = "actuator_delay"
     search = ("delay", 0.0, 0.05)
 
+    @property
+    def commands(self) -> tuple:
+        """The commands this delay shifts."""
+        return tuple(self.channels) or (self.channel,)
+
     def applies_to(self, model) -> bool:
-        return self.channel in model.inputs
+        return all(c in model.inputs for c in self.commands)
+
+    def display_equation(self, equations) -> str:
+        for c in (self.channel,) + self.commands:
+            if c in equations:
+                return c
+        return next(iter(equations))
 
     def search_bounds(self, s, model):
         # Shortest delay claimed: one sample and half a period of the derivative filter's
@@ -230,11 +254,19 @@ class ActuatorDelay(Effect):
             return s
         s = dict(s)
         t = s["t"]
-        s[self.channel] = np.interp(t - self.delay, t, s[self.channel])
+        for c in self.commands:
+            s[c] = np.interp(t - self.delay, t, s[c])
         return s
 
+    def parameters(self, theta, model):
+        out = super().parameters(theta, model)
+        if self.channels:
+            out["channels"] = list(self.channels)
+        return out
+
     def regressor_signal(self, s, model):
-        return np.asarray(self.transform_inputs(s, model)[self.channel] - s[self.channel], dtype=float)
+        c = self.display_equation(model.equation_names) if self.channels else self.channel
+        return np.asarray(self.transform_inputs(s, model)[c] - s[c], dtype=float)
 
 
 @dataclass(frozen=True)
@@ -425,6 +457,14 @@ def candidates(model, extra_columns=(), options: dict | None = None) -> list[Eff
             eff = cls(channel=ch, **({"smooth": True, **kw} if smooth else kw))
             if eff.applies_to(model):
                 out.append(eff)
+    # commands that share one delay (the rotors): one joint candidate instead of one per command
+    kw = dict(options.get("actuator_delay", {}))
+    for group, cmds in getattr(model, "shared_delays", {}).items():
+        cmds = tuple(cmds)
+        out = [e for e in out if not (isinstance(e, ActuatorDelay) and e.channel in cmds)]
+        eff = ActuatorDelay(channel=group, channels=cmds, **kw)
+        if eff.applies_to(model):
+            out.append(eff)
     for col in extra_columns:
         for ch in model.equation_names:
             out.append(ExternalForce(channel=ch, column=col))

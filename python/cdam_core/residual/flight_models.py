@@ -99,6 +99,9 @@ class Quadrotor(GreyBoxModel):
     min_gain = 0.05
     free_run_window = 1.0   # s; see estimation.free_run_error
     friction_width_search = True   # coulomb_friction searches its tanh width (effects.py)
+    # the four rotor commands reach the rotors through the same ESCs: one shared delay
+    # (effects.ActuatorDelay with channel "rotors"), never one per command
+    shared_delays = {"rotors": QUAD_INPUTS}
 
     def prepare(self, t, raw: dict, filt: DerivativeFilter | None = None,
                 extra: dict | None = None) -> dict:

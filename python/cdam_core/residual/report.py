@@ -110,7 +110,7 @@ def _figure_finding(path: Path, sel: Selection, i: int) -> None:
 
     st = sel.steps[i]
     eff, model = st.candidate.effect, sel.model
-    ch = eff.channel if eff.channel in st.before.residuals else next(iter(st.before.residuals))
+    ch = eff.display_equation(st.before.residuals)
     r0, r1 = st.before.residuals[ch], st.candidate.fit.residuals[ch]
     t = st.before.signals["t"][st.before.keep]
     u = st.before.signals[model.inputs[0]][st.before.keep]

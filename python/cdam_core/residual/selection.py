@@ -263,8 +263,7 @@ def select(model, sig: dict, candidates, alpha: float = 0.01, max_steps: int | N
         best = next((c for c in ranked if c.significant), None)
         if best is None:
             break
-        ch = best.effect.channel if best.effect.channel in current.residuals else \
-            next(iter(current.residuals))
+        ch = best.effect.display_equation(current.residuals)
         r0, r1 = current.residuals[ch], best.fit.residuals[ch]
         reg = best.effect.regressor_signal(best.fit.signals, model)[current.keep]
         err_after = _errors(best.fit, sig_fr, free_run, substeps, store,
