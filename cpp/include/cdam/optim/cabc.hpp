@@ -98,14 +98,7 @@ class Cabc {
 
   template <typename Fitness>
   Status run(SwarmT& s, Fitness& fitness, Rng& rng, double* curve) {
-    const Status st = init(s, fitness, rng);
-    if (st != Status::Ok) return st;
-    if (curve) curve[0] = static_cast<double>(s.best_fit);
-    for (int t = 1; t <= opt_.iterations; ++t) {
-      iterate(s, fitness, rng);
-      if (curve) curve[t] = static_cast<double>(s.best_fit);
-    }
-    return Status::Ok;
+    return run_optimiser(*this, s, fitness, rng, opt_.iterations, curve);
   }
 
  private:

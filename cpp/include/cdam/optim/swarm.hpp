@@ -16,6 +16,8 @@
 #include <Eigen/Core>
 
 #include "../mlp.hpp"
+#include "../rng.hpp"
+#include "../status.hpp"
 
 namespace cdam::optim {
 
@@ -76,6 +78,21 @@ inline Index arg_extreme(const V& v, Index n, bool largest = false) {
   for (Index i = 1; i < n; ++i)
     if (largest ? v[i] > v[k] : v[i] < v[k]) k = i;
   return k;
+}
+
+// init, then `iterations` iterations of any optimiser with init()/iterate() (BOA, IBOA, CABC);
+// curve (iterations + 1 values, may be null) receives the best fitness after each.
+template <typename Optimiser, typename SwarmT, typename Fitness>
+Status run_optimiser(Optimiser& o, SwarmT& s, Fitness& fitness, Rng& rng, int iterations,
+                     double* curve) {
+  const Status st = o.init(s, fitness, rng);
+  if (st != Status::Ok) return st;
+  if (curve) curve[0] = static_cast<double>(s.best_fit);
+  for (int t = 1; t <= iterations; ++t) {
+    o.iterate(s, fitness, rng);
+    if (curve) curve[t] = static_cast<double>(s.best_fit);
+  }
+  return Status::Ok;
 }
 
 }  // namespace cdam::optim
