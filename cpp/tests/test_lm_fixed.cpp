@@ -95,12 +95,12 @@ TEST_CASE("lm_fixed: double run follows train_lm epoch by epoch, heap-free") {
   NormalEquations<double>::ConstMap Xm(X, kI, kS), Tm(T, kM, kS);
   REQUIRE(train_lm<double>(dyn, th_host, Xm, Tm, nullptr, nullptr, ho, hist) == Status::Ok);
 
-  LmFixedOptions fo;
+  LmOptions fo;
   fo.epochs = E;
   static LmFixed<Net> lm;
   double mse[E + 1], mu[E + 1];
   int rec = 0;
-  LmFixedStop stop = LmFixedStop::Goal;
+  LmStop stop = LmStop::Goal;
   Eigen::internal::set_is_malloc_allowed(false);
   const Status st = lm.train(th_fixed, X, T, kS, fo, mse, mu, &rec, &stop);
   Eigen::internal::set_is_malloc_allowed(true);
@@ -131,7 +131,7 @@ TEST_CASE("lm_fixed: float run stays close to the double train_lm over a few epo
   const Mlp<double> dyn(kI, kH, kM);
   NormalEquations<double>::ConstMap Xm(X, kI, kS), Tm(T, kM, kS);
   REQUIRE(train_lm<double>(dyn, thd, Xm, Tm, nullptr, nullptr, ho, hist) == Status::Ok);
-  LmFixedOptions fo;
+  LmOptions fo;
   fo.epochs = E;
   static LmFixed<NetF> lm;
   double mse[E + 1];
@@ -145,7 +145,7 @@ TEST_CASE("lm_fixed: bad arguments") {
   using Net = Mlp<double, kI, kH, kM>;
   static LmFixed<Net> lm;
   double theta[Net::kParams] = {}, X[kI] = {}, T[kM] = {};
-  LmFixedOptions o;
+  LmOptions o;
   int rec = -1;
   CHECK(lm.train(theta, X, T, 0, o, nullptr, nullptr, &rec, nullptr) == Status::Empty);
   CHECK(rec == 0);

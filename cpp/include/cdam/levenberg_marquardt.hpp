@@ -14,36 +14,11 @@
 #include <limits>
 #include <vector>
 
+#include "lm_options.hpp"
 #include "normal_equations.hpp"
 #include "status.hpp"
 
 namespace cdam {
-
-enum class LmStop { Goal = 0, Epochs, MinGrad, MuMax, MaxFail, Cancelled };
-
-inline const char* to_string(LmStop s) {
-  switch (s) {
-    case LmStop::Goal: return "goal";
-    case LmStop::Epochs: return "epochs";
-    case LmStop::MinGrad: return "min_grad";
-    case LmStop::MuMax: return "mu_max";
-    case LmStop::MaxFail: return "max_fail";
-    case LmStop::Cancelled: return "cancelled";
-  }
-  return "unknown";
-}
-
-struct LmOptions {
-  int epochs = 1000;
-  double goal = 0.0;
-  double mu = 1e-3;
-  double mu_dec = 0.1;
-  double mu_inc = 10.0;
-  double mu_max = 1e10;
-  double min_grad = 1e-7;
-  int max_fail = 6;
-  int threads = 1;
-};
 
 struct TrainHistory {
   std::vector<double> mse, mu, grad_norm, val_mse;

@@ -22,28 +22,13 @@
 #include <Eigen/Core>
 #include <cmath>
 
+#include "lm_options.hpp"
 #include "mlp.hpp"
 #include "status.hpp"
 
 namespace cdam {
 
-// Same meaning and order as LmStop (levenberg_marquardt.hpp) for the stops that apply here.
-enum class LmFixedStop { Goal = 0, Epochs, MinGrad, MuMax };
-
-struct LmFixedOptions {
-  int epochs = 100;
-  double goal = 0.0;
-  double mu = 1e-3;
-  double mu_dec = 0.1;
-  double mu_inc = 10.0;
-  double mu_max = 1e10;
-  double min_grad = 1e-7;
-
-  bool valid() const {
-    return epochs >= 0 && goal >= 0 && mu > 0 && mu_dec > 0 && mu_dec < 1 && mu_inc > 1 &&
-           mu_max >= mu && min_grad >= 0 && std::isfinite(mu_max);
-  }
-};
+// Options and stops: LmOptions / LmStop (lm_options.hpp); max_fail and threads do not apply.
 
 template <typename Net>
 class LmFixed {
@@ -93,8 +78,8 @@ class LmFixed {
   // Trains theta (kD values, in place) on n samples. mse_hist / mu_hist (may be null) receive
   // one value per recorded epoch, at most opt.epochs + 1; *recorded is their count.
   Status train(Scalar* theta, const Scalar* X, const Scalar* T, Index n,
-               const LmFixedOptions& opt, double* mse_hist, double* mu_hist, int* recorded,
-               LmFixedStop* stop) {
+               const LmOptions& opt, double* mse_hist, double* mu_hist, int* recorded,
+               LmStop* stop) {
     if (recorded) *recorded = 0;
     if (n < 1) return Status::Empty;
     if (!opt.valid()) return Status::InvalidArgument;
@@ -102,7 +87,7 @@ class LmFixed {
     const double nm = static_cast<double>(n) * kM;
     double mse = evaluate(theta, X, T, n, false) / nm;
     double mu = opt.mu;
-    LmFixedStop why = LmFixedStop::Epochs;
+    LmStop why = LmStop::Epochs;
     for (int epoch = 0;; ++epoch) {
       evaluate(theta, X, T, n, true);
       double g2 = 0.0;
@@ -110,10 +95,10 @@ class LmFixed {
       if (mse_hist) mse_hist[epoch] = mse;
       if (mu_hist) mu_hist[epoch] = mu;
       if (recorded) *recorded = epoch + 1;
-      if (mse <= opt.goal) { why = LmFixedStop::Goal; break; }
-      if (epoch == opt.epochs) { why = LmFixedStop::Epochs; break; }
-      if (std::sqrt(g2) <= opt.min_grad) { why = LmFixedStop::MinGrad; break; }
-      if (mu >= opt.mu_max) { why = LmFixedStop::MuMax; break; }
+      if (mse <= opt.goal) { why = LmStop::Goal; break; }
+      if (epoch == opt.epochs) { why = LmStop::Epochs; break; }
+      if (std::sqrt(g2) <= opt.min_grad) { why = LmStop::MinGrad; break; }
+      if (mu >= opt.mu_max) { why = LmStop::MuMax; break; }
       while (mu <= opt.mu_max) {
         lhs_ = jtj_;
         for (int c = 0; c < kD; ++c) lhs_(c, c) += static_cast<Scalar>(mu);

@@ -90,7 +90,7 @@ inline Result run(Workspace& w, double* curve) {
   if (res.status != cdam::Status::Ok) return res;
   res.evaluations = w.swarm.evaluations;
   res.curve_len = kIterations + 1;
-  cdam::LmFixedOptions lo;
+  cdam::LmOptions lo;
   lo.epochs = kLmEpochs;
   for (int k = 0; k < kD; ++k) w.theta[k] = w.swarm.best[k];
   res.status = w.lm.train(w.theta, cdam_optim_data::kX, cdam_optim_data::kT,
