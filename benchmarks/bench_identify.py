@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import os
 import time
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -44,7 +45,10 @@ def iboa_bp() -> dict:
     cpu = time.process_time() - c0
     ref_cfg = IdentifyConfig(hidden=20, iterations=50, population=20, lm_epochs=REF_LM_EPOCHS,
                              lm_goal=0.0, smoothing_passes=5)
-    ref = identify("iboa", U, Y, seed=0, config=ref_cfg, backend="reference")
+    from cdam_core.reference.pipeline import identify_reference
+    r = identify_reference("iboa", U, Y, seed=0, hidden=20, smoothing_passes=5,
+                           options=ref_cfg.options("iboa"), lm_epochs=REF_LM_EPOCHS, lm_goal=0.0)
+    ref = SimpleNamespace(seconds=r["seconds"], lm_mse=r["lm_mse"], curve=r["curve"])
     lm_epochs = max(1, len(run.lm_mse) - 1)
     ref_lm_50 = ref.seconds["lm"] / max(1, len(ref.lm_mse) - 1) * lm_epochs
     ref_total = ref.seconds["total"] - ref.seconds["lm"] + ref_lm_50

@@ -8,7 +8,7 @@ import numpy as np
 
 
 def simulate() -> dict:
-    from cdam_core.sim import reference as ref
+    from cdam_core.reference import simulator as ref
     from cdam_core.sim.excitation import experiment_setpoints
     from cdam_core.sim.flight import run_closed_loop, substeps_for
     from cdam_core.sim.parameters import control_vector, plant_vector

@@ -9,7 +9,7 @@ def pytest_configure(config):
 
 @pytest.fixture(scope="session")
 def shared_data():
-    from cdam_core.realdata import shared_data_dir
+    from cdam_core.record.realdata import shared_data_dir
 
     d = shared_data_dir()
     if not d.is_dir():

@@ -3,9 +3,9 @@ import numpy as np
 import pytest
 from scipy.io import loadmat
 
-from cdam_core.dataset import read_dataset, write_dataset
-from cdam_core.realdata import shared_data_dir
-from cdam_core.realdata.ardrone2 import ARDRONE2_FILE, load_ardrone2
+from cdam_core.record.dataset import read_dataset, write_dataset
+from cdam_core.record.realdata import shared_data_dir
+from cdam_core.record.realdata.ardrone2 import ARDRONE2_FILE, load_ardrone2
 
 MAT = shared_data_dir() / ARDRONE2_FILE
 pytestmark = pytest.mark.skipif(not MAT.is_file(), reason="shared AR.Drone data not found")

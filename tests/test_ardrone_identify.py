@@ -2,13 +2,14 @@
 Apache-2.0). Identify on the first 75 %, test on the last 25 % (decimated to 30 Hz).
 
 The baselines are computed here independently with numpy least squares and their own
-regressor and simulation loops (nothing from cdam_core.identify.hybrid)."""
+regressor and simulation loops (nothing from cdam_core.models.hybrid)."""
 import numpy as np
 import pytest
 
-from cdam_core.identify import IdentifyConfig, evaluate, identify, select_structure
+from cdam_core.evaluate import evaluate
+from cdam_core.identify import IdentifyConfig, identify, select_structure
 
-ardrone2 = pytest.importorskip("cdam_core.realdata.ardrone2")
+ardrone2 = pytest.importorskip("cdam_core.record.realdata.ardrone2")
 
 
 @pytest.fixture(scope="module")

@@ -6,7 +6,7 @@ import can
 import numpy as np
 import pytest
 
-from cdam_core.can import (MalformedFrame, MotorState, decode_current_command, decode_feedback,
+from cdam_core.record.can import (MalformedFrame, MotorState, decode_current_command, decode_feedback,
                            encode_current_command, encode_feedback, load_dbc)
 
 

@@ -5,9 +5,9 @@ import can
 import numpy as np
 import pytest
 
-from cdam_core.can import C610Recorder, encode_current_command
+from cdam_core.record.can import C610Recorder, encode_current_command
 from cdam_core.cli.main import main
-from cdam_core.dataset import read_dataset
+from cdam_core.record.dataset import read_dataset
 
 RATE = 1000.0
 

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 import cdam_core
-from cdam_core.can import iter_log, open_bus
+from cdam_core.record.can import iter_log, open_bus
 from cdam_core.cli.main import main
 
 PKG_ROOT = str(Path(cdam_core.__file__).resolve().parents[1])

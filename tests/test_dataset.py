@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cdam_core.dataset import Dataset, read_dataset, sidecar_path, write_dataset
+from cdam_core.record.dataset import Dataset, read_dataset, sidecar_path, write_dataset
 
 
 def _write(tmp_path, text, name="d.csv"):
@@ -123,7 +123,7 @@ def test_atomic_write_leaves_old_file_on_failure(tmp_path, monkeypatch):
     write_dataset(p, good)
     before = p.read_text()
 
-    import cdam_core.dataset as mod
+    import cdam_core.record.dataset as mod
 
     def boom(*a, **k):
         raise OSError("disk full")

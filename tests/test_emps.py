@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from cdam_core.realdata import shared_data_dir
-from cdam_core.realdata.emps import load_emps
+from cdam_core.record.realdata import shared_data_dir
+from cdam_core.record.realdata.emps import load_emps
 
 pytestmark = pytest.mark.skipif(not (shared_data_dir() / "emps").is_dir(),
                                 reason="shared EMPS data not found")

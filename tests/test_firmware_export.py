@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from cdam_core import firmware as fw
-from cdam_core.model_io import save_model
+from cdam_core.models.file import save_model
 
 DEMO = fw.FIRMWARE_DIR / "generated" / "demo_model.json"
 
@@ -50,15 +50,13 @@ def test_predict_matches_plain_numpy():
 
 
 def test_narx_model_gets_one_scale_per_regressor_element(tmp_path):
-    from types import SimpleNamespace
+    from cdam_core.models import BPNetwork
     i, m, h, na, nb = 2, 1, 3, 2, 1
     n_in = na * m + nb * i
-    net = SimpleNamespace(theta_=np.linspace(-1, 1, n_in * h + h + h * m + m), n_inputs_=i,
-                          n_outputs_=m, hidden_=h, activation="logsig", narx=(na, nb, 1),
-                          scaler_x_=SimpleNamespace(data_min_=np.array([0.0, 1.0]),
-                                                    data_max_=np.array([2.0, 3.0])),
-                          scaler_y_=SimpleNamespace(data_min_=np.array([-5.0]),
-                                                    data_max_=np.array([5.0])))
+    net = BPNetwork.from_dict({
+        "theta": np.linspace(-1, 1, n_in * h + h + h * m + m).tolist(), "n_inputs": i,
+        "n_outputs": m, "hidden": h, "activation": "logsig", "narx": [na, nb, 1],
+        "x_min": [0.0, 1.0], "x_max": [2.0, 3.0], "y_min": [-5.0], "y_max": [5.0]})
     save_model(tmp_path / "narx.json", net, inputs=["a", "b"], outputs=["y"])
     fm = fw.load_firmware_model(tmp_path / "narx.json")
     assert fm.inputs == ["y[t-1]", "y[t-2]", "a[t-nk-0]", "b[t-nk-0]"]
@@ -91,7 +89,7 @@ def test_pid_config_is_read_from_the_firmware_header():
 
 
 def test_plant_feedback_frames_encode_the_state():
-    from cdam_core.can.codec import decode_feedback
+    from cdam_core.record.can.codec import decode_feedback
     p = fw.JointPlant()
     p.q = np.array([2 * np.pi / 36 * 1.25, -0.001])  # 1.25 rotor turns; slightly negative
     p.w = np.array([1.0, 0.0])

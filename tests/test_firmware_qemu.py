@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from cdam_core import firmware as fw
-from cdam_core.model_io import save_model
+from cdam_core.models.file import save_model
 
 pytestmark = [pytest.mark.slow,
               pytest.mark.skipif(fw.toolchain_available() is not None,

@@ -5,8 +5,10 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from cdam_core.identify import (IdentifyConfig, adaptation_value, compare, evaluate, identify,
-                                output_metrics)
+from cdam_core.base.metrics import adaptation_value, output_metrics
+from cdam_core.evaluate import compare, evaluate
+from cdam_core.identify import IdentifyConfig, identify
+from cdam_core.reference.pipeline import identify_reference
 
 
 def _system(n=300, seed=0):
@@ -55,9 +57,10 @@ def test_core_pipeline_equals_reference_pipeline():
     U, Y = _system(200)
     cfg = IdentifyConfig(hidden=3, iterations=4, population=6, lm_epochs=5, smoothing_passes=2)
     a = identify("iboa", U, Y, seed=1, config=cfg)
-    b = identify("iboa", U, Y, seed=1, config=cfg, backend="reference")
-    np.testing.assert_allclose(a.curve, b.curve, rtol=1e-9)
-    np.testing.assert_allclose(a.lm_mse, b.lm_mse, rtol=1e-7)
+    b = identify_reference("iboa", U, Y, seed=1, hidden=3, smoothing_passes=2,
+                           options=cfg.options("iboa"), lm_epochs=5, lm_goal=cfg.lm_goal)
+    np.testing.assert_allclose(a.curve, b["curve"], rtol=1e-9)
+    np.testing.assert_allclose(a.lm_mse, b["lm_mse"], rtol=1e-7)
 
 
 def test_narx_pipeline_has_free_run_metrics():
@@ -90,7 +93,7 @@ def test_identify_rejects_bad_input():
 def test_compare_summary_and_rank_sum():
     U, Y = _system()
     res = compare(["iboa", "boa", "bp"], U[:200], Y[:200], records={"test": (U[200:], Y[200:])},
-                  seeds=range(3), config=CFG, names=["a", "b"])
+                  seeds=range(3), config=CFG, names=["a", "b"]).result
     s = res["summary"]["boa"]["records"]["test"]["one_step"]["a"]["r"]
     rs = [r["metrics"]["test"]["one_step"]["a"]["r"] for r in res["algorithms"]["boa"]["runs"]]
     assert s["mean"] == pytest.approx(np.mean(rs)) and s["std"] == pytest.approx(np.std(rs, ddof=1))

@@ -4,8 +4,8 @@ import pytest
 from scipy import signal
 
 from cdam_core.cli.main import main
-from cdam_core.dataset import Dataset, read_dataset, write_dataset
-from cdam_core.merge import estimate_offset, merge_records
+from cdam_core.record.dataset import Dataset, read_dataset, write_dataset
+from cdam_core.record.merge import estimate_offset, merge_records
 
 TRUE_OFFSET = 3.21737   # joints time + offset = flight time
 
@@ -103,9 +103,9 @@ def test_merge_cli(tmp_path, capsys):
     assert main(["merge", str(fp), str(jp), "-o", str(out), "--pair", "phi"]) == 2
 
 
-# -- the shared resampling path (cdam_core.resample) ----------------------------------------
+# -- the shared resampling path (cdam_core.record.resample) ----------------------------------------
 def test_resample_kinds_against_independent_formulas():
-    from cdam_core.resample import find_gaps, resample, uniform_grid
+    from cdam_core.record.resample import find_gaps, resample, uniform_grid
     t = np.array([0.0, 0.1, 0.25, 0.4, 0.7])
     x = np.array([3.0, 2.9, -3.0, -2.9, 3.1])        # wraps across +-pi
     g = uniform_grid(0.0, 0.7, 20.0)

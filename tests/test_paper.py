@@ -9,7 +9,7 @@ import pytest
 from scipy.signal import decimate, savgol_filter
 
 from cdam_core.cli.main import main
-from cdam_core.dataset import read_dataset
+from cdam_core.record.dataset import read_dataset
 
 # Typed from ../shared/docs/PAPER.md ("The numbers to beat"), columns IBOA, BOA, CABC.
 PAPER_T2 = {"theta": (0.9661, 0.9288, 0.8699), "phi": (0.9671, 0.9199, 0.8671),
@@ -301,22 +301,35 @@ def test_k_step_measured_arrays_drop_t0_plus_k_minus_one_per_segment(run):
         assert len(ks) == len(one) - 2 * (k - 1) and t0 >= 0
 
 
-class _LinearArx:
-    """y(t) = a1 y(t-1) + a2 y(t-2) + b u(t-1): a model with a one-step predictor only."""
-    narx, t0 = (2, 1, 1), 2
+from cdam_core.models.protocol import Model  # noqa: E402
+
+
+class _LinearArx(Model):
+    """y(t) = a1 y(t-1) + a2 y(t-2) + b u(t-1): a model with a one-step predictor only (the
+    protocol derives k-step prediction from it)."""
+    kind = "test_arx"
+    t0 = 2
+    n_inputs_ = n_outputs_ = 1
 
     def __init__(self, a1, a2, b):
         self.a1, self.a2, self.b = a1, a2, b
 
-    def predict(self, U, Y, mode="one_step"):
-        assert mode == "one_step"
-        P = Y.copy()
-        P[2:] = self.a1 * Y[1:-1] + self.a2 * Y[:-2] + self.b * U[1:-1, :1]
-        return P
+    def _fit(self, U, Y):
+        pass
+
+    def _one_step(self, U, Y):
+        return self.a1 * Y[1:-1] + self.a2 * Y[:-2] + self.b * U[1:-1, :1]
+
+    def to_dict(self):
+        return {}
+
+    @classmethod
+    def from_dict(cls, d):
+        return cls(0, 0, 0)
 
 
 def test_k_step_prediction_against_an_explicit_simulation():
-    from cdam_core.paper.kstep import horizon_steps, k_step_predict
+    from cdam_core.evaluate.kstep import horizon_steps, k_step_predict
     g = np.random.default_rng(1)
     U, Y = g.normal(size=(40, 1)), g.normal(size=(40, 1))
     model = _LinearArx(1.5, -0.6, 0.3)
@@ -375,7 +388,7 @@ def test_persistence_baseline_from_the_records(run):
             r_np = np.corrcoef(Ym[:, j], Pm[:, j])[0, 1]
             assert res["persistence"]["test"][mode][o]["r"] == pytest.approx(r_np, abs=1e-9)
     with pytest.raises(ValueError, match="segments"):
-        from cdam_core.paper.baseline import persistence
+        from cdam_core.evaluate.baselines import persistence
         persistence([], ["a"], 100.0)
 
 

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from cdam_core.residual import analyse
-from cdam_core.residual.models import get_model
+from cdam_core.models.greybox.registry import get_model
 from cdam_core.sim import simulate_flight
 from cdam_core.sim.parameters import plant_vector, plant_dict, total_mass
 
@@ -178,7 +178,7 @@ def test_periodic_force_is_unexplained():
 
 
 def test_network_path_names_the_effect_and_the_error_drops():
-    from cdam_core.residual.effects import candidates
+    from cdam_core.models.greybox.effects import candidates
     from cdam_core.residual.network import network_residual
     t, sig = _record(["thrust_loss:c=0.01"], 4, 1.0)
     m = get_model("aerial_manipulator", fixed={"m": MASS})

@@ -4,8 +4,8 @@ import pytest
 from test_residual_synth_data import FLEX, RIGID, flexible_joint_record, rigid_axis_record
 
 from cdam_core.residual import fit, get_model, simulate
-from cdam_core.residual.effects import CoulombFriction, candidates
-from cdam_core.residual.estimation import free_run_error
+from cdam_core.models.greybox.effects import CoulombFriction, candidates
+from cdam_core.models.greybox.estimation import free_run_error
 
 
 def test_rigid_axis_exact_on_analytic_signals():

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 core = pytest.importorskip("cdam_core._core")
-from cdam_core.sim import reference as ref  # noqa: E402
+from cdam_core.reference import simulator as ref  # noqa: E402
 from cdam_core.sim.flight import substeps_for  # noqa: E402
 from cdam_core.sim.parameters import (control_vector, hover_rotor_speed, plant_dict,  # noqa: E402
                                       plant_vector, total_mass)
@@ -112,3 +112,9 @@ def test_bad_input_raises_value_error_naming_the_argument():
         core.sim_open_loop(P, x, np.zeros((3, 6)), 0.0, 1)
     with pytest.raises(ValueError, match="unknown parameter"):
         plant_vector(nonsense=1.0)
+
+
+def test_twin_writes_out_the_same_parameter_layout():
+    from cdam_core.sim.parameters import CONTROL_NAMES, PLANT_NAMES
+    assert ref.PLANT_NAMES == PLANT_NAMES
+    assert ref.CONTROL_NAMES == CONTROL_NAMES

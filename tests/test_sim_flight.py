@@ -6,7 +6,7 @@ import pytest
 
 pytest.importorskip("cdam_core._core")
 from cdam_core.cli.main import main  # noqa: E402
-from cdam_core.dataset import read_dataset  # noqa: E402
+from cdam_core.record.dataset import read_dataset  # noqa: E402
 from cdam_core.sim import EFFECTS, parse_effect, simulate_flight  # noqa: E402
 from cdam_core.sim.measurement import quantise_motor_angle  # noqa: E402
 from cdam_core.sim.parameters import plant_dict, plant_vector, total_mass  # noqa: E402

@@ -5,11 +5,11 @@ import numpy as np
 import pytest
 from pyulog import ULog
 
-import cdam_core.ulog as ulog_mod
+import cdam_core.record.ulog as ulog_mod
 from cdam_core.cli.main import main
-from cdam_core.dataset import read_dataset
-from cdam_core.realdata import shared_data_dir
-from cdam_core.ulog import load_ulog, quaternion_to_euler_zyx
+from cdam_core.record.dataset import read_dataset
+from cdam_core.record.realdata import shared_data_dir
+from cdam_core.record.ulog import load_ulog, quaternion_to_euler_zyx
 
 ULOG_DIR = shared_data_dir() / "ulog"
 SITL = ULOG_DIR / "sample_px4_events.ulg"

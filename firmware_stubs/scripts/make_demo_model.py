@@ -33,7 +33,7 @@ def demo_model(seed: int = 6, hidden: int = 20):
 
 
 def main() -> int:
-    from cdam_core.model_io import save_model
+    from cdam_core.models.file import save_model
 
     out = Path(__file__).resolve().parents[1] / "generated" / "demo_model.json"
     save_model(out, demo_model(), inputs=["q1", "w1", "i1", "q2", "w2", "i2"],

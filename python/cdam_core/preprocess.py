@@ -4,9 +4,9 @@ from __future__ import annotations
 import numpy as np
 
 from cdam_core import _core
-from cdam_core._validate import as_float_array, positive_int
+from cdam_core.base.checks import as_float_array, positive_int
 
-__all__ = ["five_point_cubic_smooth", "MinMaxScaler"]
+__all__ = ["five_point_cubic_smooth", "smooth_pair", "MinMaxScaler"]
 
 
 def five_point_cubic_smooth(y, passes: int = 1) -> np.ndarray:
@@ -21,6 +21,15 @@ def five_point_cubic_smooth(y, passes: int = 1) -> np.ndarray:
     if arr.shape[0] < 5:
         raise ValueError(f"y: five-point smoothing needs at least 5 samples, got {arr.shape[0]}")
     return _core.five_point_cubic_smooth(arr, passes)
+
+
+def smooth_pair(U, Y, passes: int):
+    """Smooth inputs and outputs alike (``passes`` five-point passes; 0 = unchanged copies)."""
+    U = np.asarray(U, dtype=np.float64)
+    Y = np.asarray(Y, dtype=np.float64)
+    if passes == 0:
+        return U.copy(), Y.copy()
+    return five_point_cubic_smooth(U, passes), five_point_cubic_smooth(Y, passes)
 
 
 class MinMaxScaler:

@@ -5,7 +5,7 @@ import signal
 import sys
 from pathlib import Path
 
-from cdam_core.cli.main import CliError
+from cdam_core.cli.common import CliError
 
 
 def register(subparsers) -> None:
@@ -32,9 +32,9 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    from cdam_core.can import C610Recorder, log_bus, open_bus
-    from cdam_core.can.codec import DEFAULT_KT_OUTPUT
-    from cdam_core.dataset import write_dataset
+    from cdam_core.record.can import C610Recorder, log_bus, open_bus
+    from cdam_core.record.can.codec import DEFAULT_KT_OUTPUT
+    from cdam_core.record.dataset import write_dataset
 
     out = Path(args.output)
     if not out.parent.is_dir():

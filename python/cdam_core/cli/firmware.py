@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from cdam_core.cli.main import CliError
+from cdam_core.cli.common import CliError
 
 
 def register(subparsers) -> None:

@@ -1,11 +1,9 @@
 """`cdam identify`: IBOA-BP, BOA-BP, CABC-BP and plain BP on a dataset CSV, with report and JSON."""
 from __future__ import annotations
 
-import json
-import math
 from pathlib import Path
 
-from cdam_core.cli.main import CliError
+from cdam_core.cli.common import CliError, parse_narx, write_json
 
 
 def register(subparsers) -> None:
@@ -45,34 +43,12 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
-def _narx(text):
-    if text is None:
-        return None
-    try:
-        v = tuple(int(x) for x in text.split(","))
-    except ValueError:
-        raise CliError(f"--narx: expected na,nb,nk integers, got {text!r}") from None
-    if len(v) != 3 or min(v) < 0 or v[0] + v[1] < 1:
-        raise CliError(f"--narx: expected na,nb,nk >= 0 with na + nb >= 1, got {text!r}")
-    return v
-
-
-def _finite(obj):
-    """JSON-safe copy: NaN/Inf become null."""
-    if isinstance(obj, dict):
-        return {k: _finite(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_finite(v) for v in obj]
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj
-
-
 def run(args) -> int:
     import sys
 
-    from cdam_core.dataset import read_dataset
-    from cdam_core.identify import IdentifyConfig, compare
+    from cdam_core.record.dataset import read_dataset
+    from cdam_core.evaluate import compare
+    from cdam_core.identify import IdentifyConfig
 
     if args.seeds < 1:
         raise CliError("--seeds: must be >= 1")
@@ -105,16 +81,14 @@ def run(args) -> int:
         raise CliError("--features physics: needs --model hybrid")
     if args.features == "physics" and len(train.inputs) != 4:
         raise CliError(f"--features physics: needs 4 motor-command inputs, got {len(train.inputs)}")
-    if args.save and args.model == "hybrid":
-        raise CliError("--save: only the bp model has a model file; hybrid models are not saved")
-    cfg = IdentifyConfig(hidden=args.hidden, narx=_narx(args.narx),
+    cfg = IdentifyConfig(hidden=args.hidden, narx=parse_narx(args.narx),
                          smoothing_passes=args.smoothing, iterations=args.iterations,
                          population=args.population, lm_epochs=args.epochs, lm_goal=args.goal,
                          model=args.model, features=args.features)
     algos = ["iboa", "boa", "cabc", "bp"] if args.algo == "all" else [args.algo]
-    result = compare(algos, U, Y, records=records, seeds=range(args.seeds), config=cfg,
-                     names=train.outputs, progress=not args.quiet)
-    models = result.pop("_models")
+    comparison = compare(algos, U, Y, records=records, seeds=range(args.seeds), config=cfg,
+                         names=train.outputs, progress=not args.quiet)
+    result, models = comparison.result, comparison.models
     result["inputs"] = train.inputs
     result["train_file"] = str(args.train)
     summary = result["summary"]
@@ -131,16 +105,14 @@ def run(args) -> int:
             print(f"IBOA vs {other} on {score}: p = {v['p_value']:.3g} "
                   f"({'IBOA better' if v['iboa_better'] else 'not significant'})")
     if args.json:
-        Path(args.json).write_text(json.dumps(_finite(result), indent=1), encoding="utf-8")
+        write_json(args.json, result)
     if args.report:
-        from cdam_core.identify.report import write_report
-        result["_models"] = models
-        md = write_report(result, args.report, records=records, times=times,
+        from cdam_core.report.identify import write_report
+        md = write_report(comparison, args.report, records=records, times=times,
                           title=f"Identification of {Path(args.train).name}")
-        result.pop("_models")
         print(f"report: {md}", file=sys.stderr)
     if args.save:
-        from cdam_core.model_io import save_model
+        from cdam_core.models.file import save_model
         save_model(args.save, models[algos[0]], inputs=train.inputs, outputs=train.outputs,
                    smoothing_passes=args.smoothing)
         print(f"model: {args.save}", file=sys.stderr)

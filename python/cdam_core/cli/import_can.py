@@ -32,9 +32,9 @@ def parse_joints(text: str) -> dict[int, str]:
 
 
 def run(args) -> int:
-    from cdam_core.can import C610Recorder, iter_log
-    from cdam_core.can.codec import DEFAULT_KT_OUTPUT
-    from cdam_core.dataset import write_dataset
+    from cdam_core.record.can import C610Recorder, iter_log
+    from cdam_core.record.can.codec import DEFAULT_KT_OUTPUT
+    from cdam_core.record.dataset import write_dataset
 
     rec = C610Recorder(joints=parse_joints(args.joints),
                        kt=args.kt if args.kt is not None else DEFAULT_KT_OUTPUT)

@@ -21,8 +21,8 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    from cdam_core.dataset import write_dataset
-    from cdam_core.ulog import load_ulog
+    from cdam_core.record.dataset import write_dataset
+    from cdam_core.record.ulog import load_ulog
 
     ds = load_ulog(Path(args.ulog), rate=args.rate, gap_factor=args.gap_factor)
     m = ds.meta

@@ -37,8 +37,7 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-class CliError(Exception):
-    """A user error: printed as 'cdam: error: ...' with exit code 2, no traceback."""
+from cdam_core.cli.common import CliError  # noqa: E402  (re-exported for the commands)
 
 
 def main(argv: list[str] | None = None) -> int:

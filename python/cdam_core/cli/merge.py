@@ -21,8 +21,8 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    from cdam_core.dataset import read_dataset, write_dataset
-    from cdam_core.merge import merge_records
+    from cdam_core.record.dataset import read_dataset, write_dataset
+    from cdam_core.record.merge import merge_records
 
     pair = None
     if args.pair:

@@ -1,7 +1,7 @@
 """`cdam paper`: the paper's study (Tables 2 and 3, Figs. 8-15) on simulated flights."""
 from __future__ import annotations
 
-from cdam_core.cli.main import CliError
+from cdam_core.cli.common import CliError, parse_narx
 
 
 def register(subparsers) -> None:
@@ -40,23 +40,11 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
-def _narx(text):
-    if text is None or text.strip().lower() in ("none", "off", ""):
-        return None
-    try:
-        v = tuple(int(x) for x in text.split(","))
-    except ValueError:
-        raise CliError(f"--narx: expected na,nb,nk integers or 'none', got {text!r}") from None
-    if len(v) != 3 or min(v) < 0 or v[0] + v[1] < 1:
-        raise CliError(f"--narx: expected na,nb,nk >= 0 with na + nb >= 1, got {text!r}")
-    return v
-
-
 def run(args) -> int:
     import sys
 
     from cdam_core.paper import PaperConfig, check_out_dir, run_paper
-    from cdam_core.paper.tables import mode_label
+    from cdam_core.report.paper.tables import mode_label
 
     if args.seeds < 1:
         raise CliError(f"--seeds: must be >= 1, got {args.seeds}")
@@ -75,7 +63,7 @@ def run(args) -> int:
         cfg = PaperConfig(seeds=args.seeds, flight_seed=args.flight_seed, duration=args.duration,
                           rate=args.rate, smoothing=args.smoothing, hidden=args.hidden,
                           population=args.population, iterations=args.iterations,
-                          lm_epochs=args.epochs, narx=_narx(args.narx), effects=list(args.effect),
+                          lm_epochs=args.epochs, narx=parse_narx(args.narx, allow_none=True), effects=list(args.effect),
                           hybrid=not args.no_hybrid,
                           horizons=tuple(args.horizon) if args.horizon else (0.1,))
     except ValueError as exc:

@@ -23,9 +23,10 @@ def parse_map(text: str | None) -> dict:
 
 
 def run(args) -> int:
-    from ..dataset import read_dataset
-    from ..residual import analyse, to_json, write_report
-    from ..residual.models import get_model
+    from cdam_core.record.dataset import read_dataset
+    from cdam_core.report.residual import to_json, write_report
+    from cdam_core.residual import analyse
+    from cdam_core.models.greybox.registry import get_model
 
     model = get_model(args.model)  # fails early, clearly, for an unknown model
     mapping = dict(model.defaults)
@@ -52,7 +53,7 @@ def run(args) -> int:
         except ValueError:
             raise ValueError(f"--fixed: {k}: not a number: {v!r}") from None
     # effects the sidecar's model declares are part of the declared model
-    from ..residual.effects import LIBRARY
+    from cdam_core.models.greybox.effects import LIBRARY
     meta = getattr(ds, "meta", None) or {}
     declared = [e for e in ((meta.get("model") or {}).get("effects") or []) if e in LIBRARY]
     sel = analyse(args.model, ds.t, signals, extra=extra or None, cutoff_hz=args.cutoff,

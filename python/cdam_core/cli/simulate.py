@@ -33,8 +33,8 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    from ..sim import describe_effects, simulate_flight, write_flight
-    from .main import CliError
+    from cdam_core.sim import describe_effects, simulate_flight, write_flight
+    from cdam_core.cli.common import CliError
 
     if args.list_effects:
         print(describe_effects())

@@ -17,8 +17,7 @@ linear ARX part by least squares and trains the algorithm's network on its resid
 (identify/hybrid.py); its final MSE is the combined model's one-step training MSE in min-max
 normalised units.
 
-``backend="reference"`` runs the same pipeline on the numpy twins (reference optimisers and
-``cdam_core.reference.BPNetwork``): the benchmark's baseline.
+The numpy twins compose the same pipeline in benchmarks/bench_identify.py (the baseline).
 """
 from __future__ import annotations
 
@@ -27,9 +26,14 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from .metrics import adaptation_value, output_metrics
+from cdam_core import _core
+from cdam_core.base.metrics import adaptation_value
+from cdam_core.base.orders import parse_orders
+from cdam_core.models.hybrid import HybridNarx
+from cdam_core.models.network import BPNetwork
+from cdam_core.preprocess import MinMaxScaler, smooth_pair
 
-__all__ = ["ALGORITHMS", "IdentifyConfig", "IdentifyRun", "identify", "evaluate", "preprocess"]
+__all__ = ["ALGORITHMS", "IdentifyConfig", "IdentifyRun", "identify", "preprocess"]
 
 ALGORITHMS = ("iboa", "boa", "cabc", "bp")
 
@@ -138,40 +142,11 @@ class IdentifyRun:
         return adaptation_value(self.final_mse)
 
 
-def preprocess(U, Y, passes: int):
-    """Smooth inputs and outputs (``passes`` five-point cubic passes; 0 = unchanged copies)."""
-    from cdam_core.preprocess import five_point_cubic_smooth
-    U = np.asarray(U, dtype=np.float64)
-    Y = np.asarray(Y, dtype=np.float64)
-    if passes == 0:
-        return U.copy(), Y.copy()
-    return five_point_cubic_smooth(U, passes), five_point_cubic_smooth(Y, passes)
-
-
-def _backend(name: str):
-    if name == "core":
-        from cdam_core import _core
-        from cdam_core.network import BPNetwork
-        from cdam_core.preprocess import MinMaxScaler
-
-        def optimise(algo, X, T, h, act, seed, options, threads):
-            return _core.optimise(algo, "bp", X=X, T=T, hidden=h, activation=act, seed=seed,
-                                  options=options, threads=threads)
-        return BPNetwork, MinMaxScaler, _core.narx_regressors, optimise
-    if name == "reference":
-        from cdam_core import reference as ref
-        from cdam_core.reference import optimisers as opt
-        from cdam_core.reference.network import BPNetwork
-
-        def optimise(algo, X, T, h, act, seed, options, threads):
-            f = opt.BpObjective(X, T, h, act)
-            return getattr(opt, algo)(f, f.dim, seed=seed, options=options)
-        return BPNetwork, ref.MinMaxScaler, ref.narx_regressors, optimise
-    raise ValueError(f"backend: unknown {name!r}; use 'core' or 'reference'")
+preprocess = smooth_pair   # the pipeline's step 1 (cdam_core.preprocess.smooth_pair)
 
 
 def identify(algo: str, U, Y, *, seed: int = 0, config: IdentifyConfig | None = None,
-             backend: str = "core", preprocessed: bool = False) -> IdentifyRun:
+             preprocessed: bool = False) -> IdentifyRun:
     """Run one pipeline (``algo`` in 'iboa', 'boa', 'cabc', 'bp') on training inputs U (N, i)
     and outputs Y (N, m). ``preprocessed=True`` skips the smoothing (already done)."""
     if algo not in ALGORITHMS:
@@ -186,29 +161,26 @@ def identify(algo: str, U, Y, *, seed: int = 0, config: IdentifyConfig | None = 
                          f"got {U.shape} and {Y.shape}")
     if not (np.all(np.isfinite(U)) and np.all(np.isfinite(Y))):
         raise ValueError("U, Y: contain NaN or Inf")
-    Net, Scaler, regressors, optimise = _backend(backend)
     t_start = time.perf_counter()
     if not preprocessed:
         U, Y = preprocess(U, Y, cfg.smoothing_passes)
     if cfg.model == "hybrid":
-        if backend != "core":
-            raise ValueError("backend: model='hybrid' runs on the core only")
         return _identify_hybrid(algo, U, Y, int(seed), cfg, t_start)
-    net = Net(hidden=cfg.hidden, activation=cfg.activation, epochs=cfg.lm_epochs,
+    net = BPNetwork(hidden=cfg.hidden, activation=cfg.activation, epochs=cfg.lm_epochs,
               goal=cfg.lm_goal, narx=cfg.narx, seed=int(seed), threads=cfg.threads)
     theta0, curve, opt_mse, evals = None, None, None, 0
     t_opt = 0.0
     if algo != "bp":
-        Us = Scaler().fit(U).transform(U)
-        Ys = Scaler().fit(Y).transform(Y)
+        Us = MinMaxScaler().fit(U).transform(U)
+        Ys = MinMaxScaler().fit(Y).transform(Y)
         if cfg.narx is None:
             X, T = Us, Ys
         else:
-            na, nb, nk = cfg.narx
-            X, T = regressors(Us, Ys, na, nb, nk), Ys[max(na, nk + nb - 1):]
+            orders = parse_orders(cfg.narx)
+            X, T = _core.narx_regressors(Us, Ys, *orders), Ys[orders.t0:]
         t0 = time.perf_counter()
-        res = optimise(algo, X, T, cfg.hidden, cfg.activation, int(seed), cfg.options(algo),
-                       cfg.threads)
+        res = _core.optimise(algo, "bp", X=X, T=T, hidden=cfg.hidden, activation=cfg.activation,
+                             seed=int(seed), options=cfg.options(algo), threads=cfg.threads)
         t_opt = time.perf_counter() - t0
         theta0, curve = res["best"], np.asarray(res["curve"])
         opt_mse, evals = float(res["best_fitness"]), int(res["evaluations"])
@@ -223,34 +195,20 @@ def identify(algo: str, U, Y, *, seed: int = 0, config: IdentifyConfig | None = 
 
 
 def _identify_hybrid(algo, U, Y, seed, cfg, t_start) -> IdentifyRun:
-    """Linear ARX + ``algo``-BP network on its residual (identify/hybrid.py)."""
-    from .hybrid import HybridNarx
-    model = HybridNarx(cfg.narx, cfg.features, algo=algo, config=cfg, seed=seed).fit(U, Y)
-    run = model.run_
+    """Linear ARX + ``algo``-BP network on its residual (:class:`cdam_core.models.HybridNarx`)."""
+    net_cfg = IdentifyConfig(**{**cfg.to_dict(), "narx": None, "smoothing_passes": 0,
+                                "bounds": tuple(cfg.bounds), "model": "bp", "features": "raw"})
+    runs = []
+
+    def fit_residual(X, R):
+        runs.append(identify(algo, X, R, seed=seed, config=net_cfg, preprocessed=True))
+        return runs[-1].model
+
+    model = HybridNarx(cfg.narx, cfg.features, fit_residual=fit_residual, seed=seed).fit(U, Y)
+    run = runs[0]
     total = time.perf_counter() - t_start
     return IdentifyRun(algo=algo, seed=seed, model=model, curve=run.curve,
                        optimiser_mse=run.optimiser_mse, evaluations=run.evaluations,
                        lm_mse=run.lm_mse, final_mse=model.train_mse_,
                        seconds={"optimise": run.seconds["optimise"], "lm": run.seconds["lm"],
                                 "total": total})
-
-
-def evaluate(model, U, Y, names=None, *, smoothing_passes: int = 0) -> dict:
-    """Per-output metrics of a fitted model on a record (U, Y).
-
-    The record is smoothed like the training data (``smoothing_passes``), and the metrics
-    compare the back-normalised predictions with these preprocessed measurements (as the
-    paper does). Returns {"one_step": {name: {r, rmse, nrmse, fit_percent}}, and for NARX
-    models "free_run": {...}}; NARX metrics skip the first t0 samples (they are given).
-    """
-    U, Y = preprocess(U, Y, smoothing_passes)
-    out = {}
-    t0 = getattr(model, "t0", 0)
-    P = model.predict(U, Y) if model.narx is not None else model.predict(U)
-    out["one_step"] = output_metrics(Y[t0:], P[t0:], names)
-    if model.narx is not None:
-        P = model.predict(U, Y, mode="free_run")
-        if not np.all(np.isfinite(P)):
-            raise ValueError("model: the free-run simulation diverged (NaN or Inf)")
-        out["free_run"] = output_metrics(Y[t0:], P[t0:], names)
-    return out

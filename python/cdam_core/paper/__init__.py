@@ -5,12 +5,12 @@ one-step, k-step-ahead and free-run, a persistence baseline, beside the publishe
 >>> from cdam_core.paper import PaperConfig, run_paper
 >>> result = run_paper(PaperConfig(seeds=4), "paper_out")    # doctest: +SKIP
 """
-from .pipeline import check_out_dir, run_paper
-from .published import FITNESS, RUN_TIME_S, TABLE2, TABLE3
-from .baseline import persistence
-from .kstep import horizon_steps, k_step_predict
-from .records import DATA_DESIGN, prepare_data, simulate_records
-from .runner import PaperConfig, evaluate_segments, run_section
+from cdam_core.paper.pipeline import check_out_dir, run_paper
+from cdam_core.report.paper.published import FITNESS, RUN_TIME_S, TABLE2, TABLE3
+from cdam_core.evaluate.baselines import persistence
+from cdam_core.evaluate.kstep import horizon_steps, k_step_predict
+from cdam_core.paper.records import DATA_DESIGN, prepare_data, simulate_records
+from cdam_core.paper.runner import PaperConfig, evaluate_segments, run_section
 
 __all__ = ["DATA_DESIGN", "FITNESS", "PaperConfig", "RUN_TIME_S", "TABLE2", "TABLE3",
            "check_out_dir", "evaluate_segments", "horizon_steps", "k_step_predict", "persistence",

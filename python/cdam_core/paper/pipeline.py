@@ -19,37 +19,22 @@ from pathlib import Path
 
 import numpy as np
 
-from . import figures
-from .baseline import persistence
-from .index import write_index
-from .published import FITNESS, OUTPUTS, RUN_TIME_S, TABLE2, TABLE3
-from .records import DATA_DESIGN, prepare_data, simulate_records, smoothed
-from .report import index_lines
-from .runner import PaperConfig, run_section
-from .tables import paper_tables, reach_summary
+from cdam_core.base.jsonio import plain
+
+from cdam_core.report.paper import figures
+from cdam_core.evaluate.baselines import persistence
+from cdam_core.report.paper.index import write_index
+from cdam_core.report.paper.published import FITNESS, OUTPUTS, RUN_TIME_S, TABLE2, TABLE3
+from cdam_core.paper.records import DATA_DESIGN, prepare_data, simulate_records, smoothed
+from cdam_core.report.paper.markdown import index_lines
+from cdam_core.paper.runner import PaperConfig, run_section
+from cdam_core.report.paper.tables import paper_tables, reach_summary
 
 __all__ = ["run_paper", "check_out_dir"]
 
 _SECTION_NAME = {"narx": "NARX", "hybrid": "hybrid ARX + network"}
 RECORD_FILES = {"exp_i": "flight_i.csv", "exp_ii": "flight_ii.csv",
                 "val_i": "validation_i.csv", "val_ii": "validation_ii.csv"}
-
-
-def _jsonable(obj):
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, (np.floating, float)):
-        v = float(obj)
-        return v if math.isfinite(v) else None
-    if isinstance(obj, (np.integer,)):
-        return int(obj)
-    if isinstance(obj, np.bool_):
-        return bool(obj)
-    if isinstance(obj, np.ndarray):
-        return _jsonable(obj.tolist())
-    return obj
 
 
 def check_out_dir(out) -> Path:
@@ -156,7 +141,7 @@ def run_paper(config: PaperConfig | None = None, out="paper_out", *, progress: b
     bar.set_postfix_str("writing records, figures and index")
     t0 = time.perf_counter()
     files = {"records": []}
-    from ..sim import write_flight
+    from cdam_core.sim import write_flight
     for key, fname in RECORD_FILES.items():
         write_flight(d / fname, records[key])
         files["records"] += [fname, fname.replace(".csv", ".json")]
@@ -196,7 +181,7 @@ def run_paper(config: PaperConfig | None = None, out="paper_out", *, progress: b
     lines = index_lines(result)
     md, page = write_index(d, lines, result["title"])
     files["index"] = [md.name, page.name, "results.json"]
-    (d / "results.json").write_text(json.dumps(_jsonable(result), indent=1), encoding="utf-8")
+    (d / "results.json").write_text(json.dumps(plain(result), indent=1), encoding="utf-8")
     bar.update()
     bar.close()
     return result

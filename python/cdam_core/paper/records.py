@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.signal import decimate
 
-from ..identify.pipelines import preprocess
+from cdam_core.identify.pipelines import preprocess
 
 __all__ = ["DATA_DESIGN", "Segment", "PaperData", "simulate_records", "prepare_data"]
 
@@ -63,7 +63,7 @@ class PaperData:
 def simulate_records(seed: int = 0, duration: float = 20.0, effects=None) -> dict:
     """Simulate experiments (i) and (ii) (``duration`` s) and their validation records
     (``duration / 2`` s) at 1 kHz; returns {"exp_i", "exp_ii", "val_i", "val_ii"} Datasets."""
-    from ..sim import simulate_flight
+    from cdam_core.sim import simulate_flight
     duration = float(duration)
     if not np.isfinite(duration) or duration <= 0:
         raise ValueError(f"duration: must be positive and finite, got {duration}")

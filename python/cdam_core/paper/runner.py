@@ -2,7 +2,7 @@
 hybrid ARX + network) over algorithms x seeds on the simulated flights, evaluated segment by
 segment.
 
-Training is :func:`cdam_core.identify.compare` (one call per algorithm and seed, so every
+Training is :func:`cdam_core.evaluate.compare` (one call per algorithm and seed, so every
 seed's model can be kept to save its predictions); summaries and rank-sum tests are
 :func:`cdam_core.identify.summarise` and :func:`cdam_core.identify.rank_sum`. Evaluation is
 done here because the test and validation records consist of two experiments: a NARX model
@@ -11,9 +11,9 @@ restarts at each segment (see :mod:`.records`). Metrics are
 first t0 samples (the given NARX initial outputs; t0 = 0 for a static map), or t0 + k - 1
 samples for a k-step-ahead prediction (:mod:`.kstep`).
 
-The hybrid section (:class:`cdam_core.identify.hybrid.HybridNarx`: linear ARX by least squares
+The hybrid section (:class:`cdam_core.models.hybrid.HybridNarx`: linear ARX by least squares
 plus the algorithm's network on its residual) chooses its orders and delay with
-:func:`cdam_core.identify.hybrid.select_structure` on the training record only (free-run r on
+:func:`cdam_core.models.hybrid.select_structure` on the training record only (free-run r on
 its last 20 %); the residual network uses the hybrid's own small default (:data:`HYBRID_NET`),
 and each run keeps the network only if it improves the free run on that training tail.
 """
@@ -24,8 +24,10 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from ..identify import IdentifyConfig, compare, output_metrics, rank_sum, summarise
-from .kstep import horizon_steps, k_step_predict
+from cdam_core.base.metrics import output_metrics
+from cdam_core.evaluate.compare import compare, rank_sum, summarise
+from cdam_core.identify import IdentifyConfig
+from cdam_core.evaluate.kstep import horizon_steps, k_step_predict
 
 __all__ = ["PaperConfig", "run_section", "evaluate_segments", "HYBRID_NET", "HYBRID_SEARCH"]
 
@@ -79,7 +81,7 @@ class PaperConfig:
         if isinstance(self.smoothing, bool) or not isinstance(self.smoothing, (int, np.integer)) \
                 or self.smoothing < 0:
             raise ValueError(f"smoothing: must be an integer >= 0, got {self.smoothing!r}")
-        from .records import decimation_factor
+        from cdam_core.paper.records import decimation_factor
         decimation_factor(1000.0, self.rate)
         self.identify_config(None)  # validates the rest
 
@@ -149,7 +151,7 @@ def evaluate_segments(model, segments, names, *, horizons=(), rate=None) -> tupl
 
 def _hybrid_structure(U, Y) -> dict:
     """select_structure on the training record (its last 20 % validates); JSON-able."""
-    from ..identify.hybrid import select_structure
+    from cdam_core.identify.structure import select_structure
     sel = select_structure(U, Y, **HYBRID_SEARCH)
     return {"narx": list(sel["narx"]), "features": sel["features"],
             "training_tail_free_run_r": sel["validation_r"],
@@ -184,8 +186,8 @@ def run_section(data, cfg: PaperConfig, narx, *, bar=None, label="static", model
         runs, top = [], None
         for seed in range(cfg.seeds):
             one = compare([algo], U, Y, seeds=[seed], config=icfg, names=names)
-            run = one["algorithms"][algo]["runs"][0]
-            fitted = one["_models"][algo]
+            run = one.result["algorithms"][algo]["runs"][0]
+            fitted = one.models[algo]
             if model == "hybrid":
                 run["residual_weight"] = float(fitted.residual_weight_)
                 run["training_tail_free_run_r"] = {str(w): float(v) for w, v

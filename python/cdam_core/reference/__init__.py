@@ -24,8 +24,10 @@ Conventions
 - Randomness: :class:`Rng` (xoshiro128**), the same stream as C++ ``cdam::Rng``.
 - Trainers take ``callback(epoch, mse)``, called after the stop tests of each recorded epoch;
   returning False stops with "cancelled" (as the core). They take no ``threads``.
-- ``BPNetwork`` and ``hidden_node_candidates`` are the package estimator with these kernels
-  swapped in (:mod:`cdam_core.reference.network`), loaded on first use.
+- ``BPNetwork`` and ``hidden_node_candidates`` (:mod:`cdam_core.reference.network`): a small
+  estimator written on these kernels alone; it shares no code with the package's estimator.
+- :mod:`cdam_core.reference.simulator`: the numpy integrator of the coupled simulator and
+  :mod:`cdam_core.reference.optimisers`: BOA, IBOA, CABC (imported by name, not with ``*``).
 
 Example
 -------
@@ -34,14 +36,15 @@ Example
 >>> ref.five_point_cubic_smooth(np.arange(6.0)).tolist()
 [0.0, 1.0, 2.0, 3.0, 4.0, 5.0]
 """
-from .gradient_descent import train_gd
-from .levenberg_marquardt import train_lm
-from .mlp import (mlp_forward, mlp_jacobian, mlp_jtj, mlp_mse_gradient, mlp_num_params,
+from cdam_core.reference.gradient_descent import train_gd
+from cdam_core.reference.levenberg_marquardt import train_lm
+from cdam_core.reference.mlp import (mlp_forward, mlp_jacobian, mlp_jtj, mlp_mse_gradient, mlp_num_params,
                   mlp_unpack)
-from .narx import narx_regressors, narx_simulate, narx_start
-from .rng import Rng
-from .scaling import MinMaxScaler
-from .smoothing import five_point_cubic_smooth
+from cdam_core.reference.narx import narx_regressors, narx_simulate, narx_start
+from cdam_core.reference.network import BPNetwork, hidden_node_candidates
+from cdam_core.reference.rng import Rng
+from cdam_core.reference.scaling import MinMaxScaler
+from cdam_core.reference.smoothing import five_point_cubic_smooth
 
 __all__ = [
     "BPNetwork",
@@ -62,11 +65,3 @@ __all__ = [
     "train_lm",
 ]
 
-
-def __getattr__(name: str):
-    # the estimator lives in the package (cdam_core.network); load it only when asked so the
-    # kernel twins stay importable on their own
-    if name in ("BPNetwork", "hidden_node_candidates"):
-        from . import network
-        return getattr(network, name)
-    raise AttributeError(f"module 'cdam_core.reference' has no attribute {name!r}")

@@ -2,7 +2,7 @@
 
 Every public reference function validates its arguments here first and raises
 ``ValueError("<arg>: <problem>")``. This module is deliberately independent of
-``cdam_core._validate`` so that the reference never depends on code it is compared with.
+``cdam_core.base.checks`` so that the reference never depends on code it is compared with.
 """
 from __future__ import annotations
 

@@ -7,9 +7,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._checks import integer, real
-from .levenberg_marquardt import _cancelled
-from .mlp import _prepare, mlp_mse_gradient
+from cdam_core.reference._checks import integer, real
+from cdam_core.reference.levenberg_marquardt import _cancelled
+from cdam_core.reference.mlp import _prepare, mlp_mse_gradient
 
 
 def train_gd(theta0, X, T, hidden: int, activation: str = "tansig", *, lr: float = 0.01,

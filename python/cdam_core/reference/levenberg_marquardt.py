@@ -22,8 +22,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from ._checks import common_dtype, float_array, integer, real, same_rows
-from .mlp import _forward, _jacobian, _prepare
+from cdam_core.reference._checks import common_dtype, float_array, integer, real, same_rows
+from cdam_core.reference.mlp import _forward, _jacobian, _prepare
 
 MU_FLOOR = 1e-20
 

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._checks import activation as check_activation
-from ._checks import common_dtype, float_array, integer, same_rows
+from cdam_core.reference._checks import activation as check_activation
+from cdam_core.reference._checks import common_dtype, float_array, integer, same_rows
 
 
 def mlp_num_params(i: int, h: int, m: int) -> int:

@@ -12,9 +12,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._checks import activation as check_activation
-from ._checks import common_dtype, float_array, integer, same_rows
-from .mlp import _forward
+from cdam_core.reference._checks import activation as check_activation
+from cdam_core.reference._checks import common_dtype, float_array, integer, same_rows
+from cdam_core.reference.mlp import _forward
 
 
 def _orders(na, nb, nk):

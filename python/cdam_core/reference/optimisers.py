@@ -28,10 +28,10 @@ import math
 
 import numpy as np
 
-from ._checks import activation as check_activation
-from ._checks import float_array, integer, real, same_rows
-from .mlp import _forward
-from .rng import Rng
+from cdam_core.reference._checks import activation as check_activation
+from cdam_core.reference._checks import float_array, integer, real, same_rows
+from cdam_core.reference.mlp import _forward
+from cdam_core.reference.rng import Rng
 
 __all__ = ["BpObjective", "boa", "iboa", "cabc", "kmeans", "LogisticMap", "DEFAULTS"]
 

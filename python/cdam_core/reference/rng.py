@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from ._checks import integer, real
+from cdam_core.reference._checks import integer, real
 
 _MASK = 0xFFFFFFFF
 

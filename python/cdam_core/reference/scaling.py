@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._checks import float_array
+from cdam_core.reference._checks import float_array
 
 
 class MinMaxScaler:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._checks import float_array, integer
+from cdam_core.reference._checks import float_array, integer
 
 
 def _one_pass(y: np.ndarray) -> np.ndarray:

@@ -10,7 +10,7 @@ from scipy.stats import chi2
 from statsmodels.stats.diagnostic import acorr_ljungbox
 from statsmodels.tsa.stattools import acf as sm_acf
 
-from ._checks import as_signal, positive
+from cdam_core.base.signals import as_signal, positive
 
 Z99 = 2.58  # two-sided 99 % normal quantile, as MATLAB resid's band
 

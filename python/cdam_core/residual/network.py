@@ -14,9 +14,9 @@ from __future__ import annotations
 import numpy as np
 from scipy import stats
 
-from . import diagnostics as dg
-from .effects import candidates as library_candidates
-from .estimation import design
+from cdam_core.residual import diagnostics as dg
+from cdam_core.models.greybox.effects import candidates as library_candidates
+from cdam_core.models.greybox.estimation import design
 
 
 def _columns(model, sig, effects, eq, keep):
@@ -28,7 +28,7 @@ def _columns(model, sig, effects, eq, keep):
 
 
 def _train(X, y, hidden, epochs, seed):
-    from ..network import BPNetwork
+    from cdam_core.models.network import BPNetwork
     net = BPNetwork(hidden=hidden, epochs=epochs, seed=seed, threads=1)
     net.fit(X, y[:, None])
     r = y - net.predict(X)[:, 0]

@@ -20,8 +20,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import optimize, stats
 
-from . import diagnostics as dg
-from .estimation import Fit, fit, free_run_error, set_equation_weights
+from cdam_core.residual import diagnostics as dg
+from cdam_core.models.greybox.estimation import Fit, fit, free_run_error, set_equation_weights
 
 
 @dataclass

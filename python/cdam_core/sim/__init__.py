@@ -7,9 +7,9 @@ The physics and loops run in the C++ core (``cdam/sim/``); :mod:`.reference` is 
 >>> ds.columns[:6]                                       # doctest: +SKIP
 ['T', 'tau_phi', 'tau_theta', 'tau_psi', 'tau_m1', 'tau_m2']
 """
-from .effects import EFFECTS, describe_effects, parse_effect, resolve_effects
-from .flight import run_closed_loop, simulate_flight, substeps_for, validation_seed, write_flight
-from .parameters import CONTROL_FIELDS, PLANT_FIELDS, control_vector, plant_vector
+from cdam_core.sim.effects import EFFECTS, describe_effects, parse_effect, resolve_effects
+from cdam_core.sim.flight import run_closed_loop, simulate_flight, substeps_for, validation_seed, write_flight
+from cdam_core.sim.parameters import CONTROL_FIELDS, PLANT_FIELDS, control_vector, plant_vector
 
 __all__ = ["EFFECTS", "describe_effects", "parse_effect", "resolve_effects", "run_closed_loop",
            "simulate_flight", "substeps_for", "validation_seed", "write_flight", "CONTROL_FIELDS",

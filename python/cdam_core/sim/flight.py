@@ -1,7 +1,7 @@
 """Flights of experiments (i) and (ii): closed-loop simulation, measurement, dataset output.
 
-``simulate_flight`` runs the C++ core (``backend="core"``) or the numpy reference
-(``backend="reference"``, slow; for tests) and returns a :class:`cdam_core.dataset.Dataset`.
+``simulate_flight`` runs the C++ core (the numpy twin, :mod:`cdam_core.reference.simulator`,
+checks it in the tests) and returns a :class:`cdam_core.record.dataset.Dataset`.
 Seeds: the excitation draws from ``numpy.random.default_rng([seed, 1])``, the sensor noise from
 ``default_rng([seed, 2])``. The validation record uses seed ``(seed + 1000003) mod 2**32`` and
 lasts 10 s unless ``duration`` is given.
@@ -12,12 +12,12 @@ import math
 
 import numpy as np
 
-from ..dataset import Dataset, STANDARD_INPUTS, STANDARD_OUTPUTS, write_dataset
-from . import reference as ref
-from .effects import EFFECTS, resolve_effects
-from .excitation import CHANNELS, experiment_setpoints
-from .measurement import ENCODER_COUNTS, LINK_ENCODER_COUNTS, NOISE_STD, measure
-from .parameters import (CONTROL_NAMES, PLANT_NAMES, control_vector, plant_dict, plant_vector)
+from cdam_core.record.dataset import Dataset, STANDARD_INPUTS, STANDARD_OUTPUTS, write_dataset
+from cdam_core.sim.effects import EFFECTS, resolve_effects
+from cdam_core.sim.excitation import CHANNELS, experiment_setpoints
+from cdam_core.sim.measurement import ENCODER_COUNTS, LINK_ENCODER_COUNTS, NOISE_STD, measure
+from cdam_core.sim.state import hover_state
+from cdam_core.sim.parameters import (CONTROL_NAMES, PLANT_NAMES, control_vector, plant_dict, plant_vector)
 
 __all__ = ["simulate_flight", "run_closed_loop", "substeps_for", "validation_seed", "write_flight"]
 
@@ -42,19 +42,15 @@ def substeps_for(plant, dt: float) -> int:
     return max(1, math.ceil(dt * rate / 2.5))
 
 
-def run_closed_loop(plant, control, x0, setpoints, dt=1e-3, substeps=None, backend="core"):
+def run_closed_loop(plant, control, x0, setpoints, dt=1e-3, substeps=None):
     """(states (N, 21), log (N, 10)) of a closed-loop flight; see ``cdam/sim/simulator.hpp``."""
     plant = np.asarray(plant, dtype=np.float64)
     control = np.asarray(control, dtype=np.float64)
     if substeps is None:
         substeps = substeps_for(plant, dt)
-    if backend == "core":
-        from .. import _core
-        return _core.sim_closed_loop(plant, control, np.asarray(x0, float),
-                                     np.ascontiguousarray(setpoints, dtype=np.float64), dt, substeps)
-    if backend == "reference":
-        return ref.simulate_closed_loop(plant, control, x0, setpoints, dt, substeps)
-    raise ValueError(f"backend: expected 'core' or 'reference', got {backend!r}")
+    from cdam_core import _core
+    return _core.sim_closed_loop(plant, control, np.asarray(x0, float),
+                                 np.ascontiguousarray(setpoints, dtype=np.float64), dt, substeps)
 
 
 def _check_seed(seed) -> int:
@@ -67,7 +63,7 @@ def _check_seed(seed) -> int:
 
 def simulate_flight(experiment: str = "i", duration: float | None = None, seed: int = 0,
                     effects=None, validation: bool = False, declare=(), noise_scale: float = 1.0,
-                    dt: float = 1e-3, backend: str = "core", plant_overrides: dict | None = None,
+                    dt: float = 1e-3, plant_overrides: dict | None = None,
                     control_overrides: dict | None = None) -> Dataset:
     """Simulate one logged flight and return it as a Dataset (columns: the standard inputs and
     outputs, theta_m1, theta_m2, omega1..4, battery_v; sidecar metadata in ``meta``).
@@ -83,7 +79,6 @@ def simulate_flight(experiment: str = "i", duration: float | None = None, seed: 
         declare: effect names declared in the sidecar's model (others stay hidden).
         noise_scale: multiplies every sensor noise standard deviation.
         dt: logging and control period (s).
-        backend: "core" (C++) or "reference" (numpy).
     """
     seed = _check_seed(seed)
     if duration is None:
@@ -108,9 +103,9 @@ def simulate_flight(experiment: str = "i", duration: float | None = None, seed: 
     t = np.arange(n) * dt
     altitude = flight.get("altitude", 1.0)
     sp = experiment_setpoints(experiment, t, np.random.default_rng([run_seed, 1]), altitude)
-    x0 = ref.hover_state(plant, Z=altitude)
+    x0 = hover_state(Z=altitude)
     substeps = substeps_for(plant, dt)
-    states, log = run_closed_loop(plant, control, x0, sp, dt, substeps, backend)
+    states, log = run_closed_loop(plant, control, x0, sp, dt, substeps)
     if not np.all(np.isfinite(states)):
         raise ValueError("simulation diverged (non-finite state); check the parameters")
     cols = measure(states, log, np.random.default_rng([run_seed, 2]), noise_scale)

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .parameters import ENCODER_COUNTS, GEAR_RATIO
-from .reference import quat_to_euler
+from cdam_core.sim.parameters import ENCODER_COUNTS, GEAR_RATIO
+from cdam_core.sim.state import quat_to_euler
 
 __all__ = ["NOISE_STD", "LINK_ENCODER_COUNTS", "quantise_motor_angle", "quantise_angle", "measure"]
 

@@ -1,0 +1,1 @@
+"""cdam_core.base."""

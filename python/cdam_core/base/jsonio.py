@@ -1,0 +1,56 @@
+"""JSON out: plain data from numpy results, and atomic writes (no half-written file is left).
+
+``plain`` is the one JSON cleaning every report and model file uses: numpy scalars and arrays
+become numbers and lists, NaN and Inf become null (JSON has neither).
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["plain", "write_text_atomic", "write_json_atomic"]
+
+
+def plain(x):
+    """JSON-able plain data: numpy scalars and arrays to numbers and lists, non-finite to None."""
+    if isinstance(x, dict):
+        return {str(k): plain(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [plain(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return plain(x.tolist())
+    if isinstance(x, (bool, np.bool_)):
+        return bool(x)
+    if isinstance(x, (int, np.integer)):
+        return int(x)
+    if isinstance(x, (float, np.floating)):
+        v = float(x)
+        return v if math.isfinite(v) else None
+    return x
+
+
+
+def write_text_atomic(path, text: str) -> Path:
+    """Write ``text`` to ``path`` through a temporary file in the same folder and a rename."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=str(path.parent or Path(".")), prefix=path.name + ".",
+                               suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return path
+
+
+def write_json_atomic(path, obj, indent: int | None = 1) -> Path:
+    """``plain(obj)`` as strict JSON (no NaN), written atomically."""
+    return write_text_atomic(path, json.dumps(plain(obj), indent=indent, allow_nan=False) + "\n")

@@ -1,0 +1,29 @@
+"""Firmware side, split by job: the model as the firmware runs it (:mod:`.model`), generated
+headers (:mod:`.export`), the cross build (:mod:`.build`), QEMU runs (:mod:`.qemu`),
+``cdam firmware check`` (:mod:`.check`) and processor in the loop (:mod:`.pil`).
+
+The firmware (``firmware_stubs/``) runs the core's own ``cdam::Mlp`` (cpp/include/cdam/mlp.hpp)
+with the fast activation of cdam/fast_math.hpp on the weights of ``generated/model.hpp``.
+NARX models: the firmware works in the network's input space (the regressor). The exporter
+writes one pair of scaling constants per regressor element (the output scaler's for past
+outputs, the input scaler's for past inputs), so the firmware scales a raw regressor exactly as
+``BPNetwork`` does. Only numbers from a model file reach generated code.
+"""
+from cdam_core.firmware.build import IMAGES, build, heap_guard_works
+from cdam_core.firmware.check import check, default_inputs
+from cdam_core.firmware.export import (OPTIM_DATA_SEED, OPTIM_SAMPLES, OPTIM_SHAPE, export_header,
+                                       export_optim_data, optim_data)
+from cdam_core.firmware.model import FirmwareModel, load_firmware_model, theta_fnv1a
+from cdam_core.firmware.paths import ARM_GCC, FIRMWARE_DIR, QEMU, toolchain_available
+from cdam_core.firmware.pil import (JointPlant, closed_loop_pil, closed_loop_python,
+                                    default_reference, pid_config)
+from cdam_core.firmware.qemu import run_equivalence, run_kernels, run_optim_host, run_optim_target, run_qemu
+
+__all__ = [
+    "ARM_GCC", "FIRMWARE_DIR", "FirmwareModel", "IMAGES", "JointPlant", "OPTIM_DATA_SEED",
+    "OPTIM_SAMPLES", "OPTIM_SHAPE", "QEMU", "build", "check", "closed_loop_pil",
+    "closed_loop_python", "default_inputs", "default_reference", "export_header",
+    "export_optim_data", "heap_guard_works", "load_firmware_model", "optim_data", "pid_config",
+    "run_equivalence", "run_kernels", "run_optim_host", "run_optim_target", "run_qemu",
+    "theta_fnv1a", "toolchain_available",
+]

@@ -1,0 +1,196 @@
+"""Declared grey-box models, linear in their parameters, for inverse-dynamics least squares.
+
+A model maps measured signals (named by the model: ``tau`` and ``q`` for the rigid axis) to one
+or more *equations*; each equation is ``y = sum_p theta_p * column_p`` with columns built from
+positions, velocities and accelerations. Velocities and accelerations come from a zero-phase
+Butterworth low-pass (``scipy.signal.filtfilt``, order 4, cutoff 100 Hz by default, as in the
+EMPS benchmark's IDIM-LS scripts) followed by central differences (``numpy.gradient``).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+from scipy import signal as sps
+
+from cdam_core.base.signals import as_signal, as_time, positive
+
+
+@lru_cache(maxsize=64)
+def _butter(order: int, cutoff: float, fs: float) -> np.ndarray:
+    return sps.butter(order, cutoff, fs=fs, output="sos")
+
+
+@dataclass(frozen=True)
+class DerivativeFilter:
+    """Zero-phase Butterworth low-pass + central differences (the stated derivative filter)."""
+
+    cutoff_hz: float = 100.0
+    order: int = 4
+    padlen: int | None = None   # sosfiltfilt edge padding (None: scipy's default)
+
+    def describe(self) -> str:
+        return (f"zero-phase Butterworth low-pass (scipy.signal.filtfilt), order {self.order}, "
+                f"cutoff {self.cutoff_hz:g} Hz, then central differences (numpy.gradient)")
+
+    def lowpass(self, x, dt: float) -> np.ndarray:
+        """The zero-phase low-pass alone (parallel filtering of both equation sides)."""
+        sos = _butter(int(self.order), positive(self.cutoff_hz, "cutoff_hz"), 1.0 / dt)
+        x = np.asarray(x, dtype=float)
+        return sps.sosfiltfilt(sos, x, axis=0, padlen=self._pad(x.shape[0]))
+
+    def _pad(self, n: int):
+        return None if self.padlen is None else min(int(self.padlen), n - 1)
+
+    def apply(self, x: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Return (filtered x, first derivative, second derivative)."""
+        fs = 1.0 / dt
+        cutoff = positive(self.cutoff_hz, "cutoff_hz")
+        if cutoff >= 0.5 * fs:
+            raise ValueError(f"cutoff_hz: {cutoff:g} Hz is not below the Nyquist frequency {0.5 * fs:g} Hz")
+        if int(self.order) < 1:
+            raise ValueError(f"order: must be >= 1, got {self.order}")
+        sos = sps.butter(int(self.order), cutoff, fs=fs, output="sos")
+        if x.size <= 3 * (2 * sos.shape[0] + 1):
+            raise ValueError(f"signal: {x.size} samples are too few for the order-{self.order} filter")
+        xf = sps.sosfiltfilt(sos, x, padlen=self._pad(x.size))
+        xd = np.gradient(xf, dt)
+        return xf, xd, np.gradient(xd, dt)
+
+
+class GreyBoxModel:
+    """Base class. Subclasses set the names below and implement ``equations``."""
+
+    name = ""
+    signals: tuple[str, ...] = ()        # measured signals the model needs (mapped names)
+    inputs: tuple[str, ...] = ()         # the inputs among them (torques/forces)
+    positions: tuple[str, ...] = ()      # generalised coordinates (measured outputs)
+    equation_names: tuple[str, ...] = ()
+    parameter_names: tuple[str, ...] = ()
+    viscous: dict[str, tuple[str, str]] = {}   # equation -> (viscous parameter, velocity signal)
+    offset: dict[str, str] = {}                # equation -> constant parameter, if any
+    defaults: dict[str, str] = {}              # signal -> default dataset column
+    cables: dict = {}     # link equation -> (motor equation, deflection, its rate, stiffness)
+    parallel_filter = False   # also low-pass both sides of every equation (flight models)
+    default_cutoff_hz = 100.0
+    max_steps = 5
+    min_gain = 0.01   # smallest share of the residual SSE an effect must remove to be claimed
+
+    def __init__(self, fixed: dict[str, float] | None = None):
+        fixed = dict(fixed or {})
+        for k, v in fixed.items():
+            if k not in self.parameter_names:
+                raise ValueError(f"fixed: unknown parameter {k!r} of {self.name} "
+                                 f"(known: {', '.join(self.parameter_names)})")
+            if not np.isfinite(float(v)):
+                raise ValueError(f"fixed: parameter {k!r} is not finite")
+        self.fixed = {k: float(v) for k, v in fixed.items()}
+
+    # -- signals ---------------------------------------------------------------------------
+    def prepare(self, t, raw: dict, filt: DerivativeFilter | None = None,
+                extra: dict | None = None) -> dict:
+        """Check the raw signals and add smoothed derivatives.
+
+        ``raw`` maps each name in ``self.signals`` to an array; ``extra`` holds measured channels
+        the model leaves out (candidates for ``external_force``). Returns a dict of arrays with
+        ``t``, ``dt``, the raw inputs, each position ``p`` (filtered), ``p_d`` and ``p_dd``.
+        """
+        filt = filt or DerivativeFilter()
+        t = as_time(t, "t")
+        n = t.size
+        if not isinstance(raw, dict):
+            raise ValueError("raw: expected a dict of signals")
+        missing = [s for s in self.signals if s not in raw]
+        if missing:
+            raise ValueError(f"raw: {self.name} needs signal(s) {', '.join(missing)}")
+        dt = float(np.mean(np.diff(t)))
+        sig: dict = {"t": t, "dt": dt, "filter": filt}
+        for s in self.inputs:
+            sig[s] = as_signal(raw[s], s, n)
+        for p in self.positions:
+            x = as_signal(raw[p], p, n)
+            sig[p + "_raw"] = x
+            sig[p], sig[p + "_d"], sig[p + "_dd"] = filt.apply(x, dt)
+        sig["extra"] = {}
+        for k, v in (extra or {}).items():
+            if k in self.signals:
+                raise ValueError(f"extra: {k!r} is already a signal of the model")
+            sig["extra"][k] = as_signal(v, f"extra[{k}]", n)
+        return self.augment(sig)
+
+    def augment(self, s: dict) -> dict:
+        """Add derived quantities (e.g. the cable deflection) to a signal or state dict."""
+        return s
+
+    # -- equations -------------------------------------------------------------------------
+    def equations(self, s: dict) -> dict:
+        """``{equation: (y, {parameter: column})}`` on a signal or state dict."""
+        raise NotImplementedError
+
+    def reference(self, eq: str, s: dict, theta: dict) -> np.ndarray:
+        """The signal an equation error is normalised by (the measured torque by default)."""
+        return s[eq]
+
+    def applies(self, eq: str) -> bool:
+        return eq in self.equation_names
+
+
+class RigidAxis(GreyBoxModel):
+    """One rigid axis (the EMPS kind): ``tau = M q'' + Fv q' + offset``.
+
+    Signals: ``tau`` (force or torque, input) and ``q`` (position, output).
+    """
+
+    name = "rigid_axis"
+    signals = ("tau", "q")
+    inputs = ("tau",)
+    positions = ("q",)
+    equation_names = ("tau",)
+    parameter_names = ("M", "Fv", "offset")
+    viscous = {"tau": ("Fv", "q_d")}
+    offset = {"tau": "offset"}
+    defaults = {"tau": "tau", "q": "q"}
+
+    def equations(self, s: dict) -> dict:
+        one = np.ones_like(np.asarray(s["q_d"], dtype=float))
+        return {"tau": (s["tau"], {"M": s["q_dd"], "Fv": s["q_d"], "offset": one})}
+
+
+class FlexibleJoint(GreyBoxModel):
+    """One cable-driven joint, PAPER.md equations (3)-(5) (Spong's flexible joint).
+
+    Motor side (3): ``Im thm'' + Dm thm' + tau_l = tau_m``; cable (4):
+    ``tau_l = Ks (thm - q) + Kd (thm' - q')``; link side (5) for one hanging link:
+    ``I q'' + Dl q' + G sin(q) = tau_l``. Equation ``tau_m`` is (3), equation ``tau_l`` is (5)
+    written as ``0 = I q'' + Dl q' + G sin q - tau_l``; both share Ks and Kd, so stacking them
+    makes every parameter identifiable from ``tau_m``, ``theta_m`` and ``q``.
+    """
+
+    name = "flexible_joint"
+    signals = ("tau_m", "theta_m", "q")
+    inputs = ("tau_m",)
+    positions = ("theta_m", "q")
+    equation_names = ("tau_m", "tau_l")
+    parameter_names = ("Im", "Dm", "Ks", "Kd", "I", "Dl", "G")
+    viscous = {"tau_m": ("Dm", "theta_m_d"), "tau_l": ("Dl", "q_d")}
+    offset = {}
+    defaults = {"tau_m": "tau_m1", "theta_m": "theta_m1", "q": "q1"}
+    cables = {"tau_l": ("tau_m", "defl", "defl_d", "Ks")}
+
+    def augment(self, s: dict) -> dict:
+        s["defl"] = s["theta_m"] - s["q"]
+        s["defl_d"] = s["theta_m_d"] - s["q_d"]
+        return s
+
+    def equations(self, s: dict) -> dict:
+        d, dd = s["defl"], s["defl_d"]
+        zero = np.zeros_like(np.asarray(d, dtype=float))
+        motor = {"Im": s["theta_m_dd"], "Dm": s["theta_m_d"], "Ks": d, "Kd": dd}
+        link = {"I": s["q_dd"], "Dl": s["q_d"], "G": np.sin(s["q"]), "Ks": -d, "Kd": -dd}
+        return {"tau_m": (s["tau_m"], motor), "tau_l": (zero, link)}
+
+    def reference(self, eq: str, s: dict, theta: dict) -> np.ndarray:
+        if eq == "tau_l":  # the cable torque the link equation balances
+            return theta.get("Ks", 0.0) * s["defl"] + theta.get("Kd", 0.0) * s["defl_d"]
+        return s[eq]

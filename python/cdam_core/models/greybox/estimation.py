@@ -1,0 +1,402 @@
+"""IDIM-LS estimation of a declared model (plus effects) and its free-run (output) simulation.
+
+Estimation: stack every equation's rows ``y = Phi theta`` over the record (the first and last
+``trim`` samples, where the zero-phase filter and the differences have edge effects, are left
+out), move fixed parameters to the left side, solve with ``numpy.linalg.lstsq``. Weighted
+(IDIM-WLS, Gautier): when the prepared signals hold ``_eq_weights`` (``{equation: w}``, set by
+:func:`set_equation_weights` as 1 / the RMS of each equation's ordinary least-squares
+residual), each equation's rows are multiplied by its weight, so a noisy equation (the link
+equations of the flight model, whose body accelerations are twice-differentiated position
+noise) does not bias the parameters it shares with a clean one (the cable stiffness in the
+motor equation). The residuals stay in physical units; :attr:`Fit.sse` is the weighted sum.
+Free run: integrate the same equations forward from the measured inputs alone (semi-implicit
+Euler, ``substeps`` per sample chosen so that h * |lambda|max <= 0.5 for the linearised model).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from cdam_core.base.signals import as_signal, as_time
+
+
+def apply_effects(model, sig: dict, effects) -> dict:
+    s = dict(sig)
+    for e in effects:
+        s = e.transform_inputs(s, model)
+    for e in effects:
+        s = e.transform_state(s, model)
+    return s
+
+
+def design(model, sig: dict, effects=()) -> tuple[dict, dict]:
+    """The transformed signals and ``{equation: (y, {parameter: column})}`` with effects added."""
+    s = apply_effects(model, sig, effects)
+    eqs = {k: (y, dict(cols)) for k, (y, cols) in model.equations(s).items()}
+    for e in effects:
+        for eq, cols in e.regressors(s, model).items():
+            if eq not in eqs:
+                raise ValueError(f"effects: {e.key} adds to unknown equation {eq!r}")
+            eqs[eq][1].update(cols)
+    if getattr(model, "parallel_filter", False) and "filter" in s:
+        n = np.asarray(s["t"]).size
+        cache = sig.setdefault("_lowpass_cache", {})
+        out, sigs = {}, {}
+        for eq, (y, cols) in eqs.items():
+            f = model.equation_filter(eq, s)
+            names = ["__y"] + list(cols)
+            arrs = [np.broadcast_to(np.asarray(c, dtype=float), (n,))
+                    for c in [y] + list(cols.values())]
+            keys = [(eq, nm, f.cutoff_hz, hash(a.tobytes())) for nm, a in zip(names, arrs)]
+            todo = [i for i, key in enumerate(keys) if key not in cache]
+            if todo:
+                filtered = f.lowpass(np.column_stack([arrs[i] for i in todo]), s["dt"])
+                if len(cache) > 4000:
+                    cache.clear()
+                for j, i in enumerate(todo):
+                    cache[keys[i]] = filtered[:, j]
+            got = [cache[key] for key in keys]
+            out[eq] = (got[0], dict(zip(names[1:], got[1:])))
+            sigs[eq] = tuple(keys)
+        eqs = out
+        s["_signatures"] = sigs
+    return s, eqs
+
+
+def _reference(model, eq, s, theta, y, n, keep):
+    ref = model.reference(eq, s, theta)
+    if ref is None:   # the equation's own (filtered) left side
+        return np.broadcast_to(np.asarray(y, dtype=float), (n,))[keep]
+    return np.broadcast_to(np.asarray(ref, dtype=float), (n,))[keep]
+
+
+@dataclass
+class Fit:
+    """A least-squares fit: estimates, residuals per equation and the settings used."""
+
+    model: object
+    effects: tuple
+    theta: dict                 # every parameter (estimated and fixed)
+    estimated: list             # names of the estimated parameters
+    residuals: dict             # equation -> residual over the kept samples
+    references: dict            # equation -> reference signal (normalisation)
+    signals: dict               # transformed signals
+    keep: slice
+    cond: float
+    columns: dict = field(default_factory=dict)   # equation -> estimated parameters in it
+    weights: dict = field(default_factory=dict)   # equation -> WLS weight (missing: 1)
+
+    def wsse(self, equations=None) -> float:
+        """Weighted sum of squared residuals over ``equations`` (default: all)."""
+        eqs = self.residuals if equations is None else equations
+        return float(sum(self.weights.get(e, 1.0) ** 2 * np.sum(self.residuals[e] ** 2)
+                         for e in eqs))
+
+    def wref(self, equations=None) -> float:
+        """Weighted sum of squares of the reference signals over ``equations``."""
+        eqs = self.references if equations is None else equations
+        return float(sum(self.weights.get(e, 1.0) ** 2 * np.sum(self.references[e] ** 2)
+                         for e in eqs))
+
+    @property
+    def sse(self) -> float:
+        return self.wsse()
+
+    @property
+    def n_rows(self) -> int:
+        return int(sum(r.size for r in self.residuals.values()))
+
+    @property
+    def k(self) -> int:
+        return len(self.estimated)
+
+    def equation_error(self) -> dict:
+        """``{equation: {"rmse", "nrmse"}}``; nrmse = ||e|| / ||reference|| (EMPS relative error)."""
+        out = {}
+        for eq, r in self.residuals.items():
+            ref = self.references[eq]
+            den = float(np.linalg.norm(ref))
+            out[eq] = {"rmse": float(np.sqrt(np.mean(r ** 2))),
+                       "nrmse": float(np.linalg.norm(r) / den) if den > 0 else float("nan")}
+        return out
+
+
+def _components(eqs: dict, est: list) -> list:
+    """Groups of equations linked by shared estimated parameters (independent LS blocks)."""
+    parent = {eq: eq for eq in eqs}
+
+    def root(e):
+        while parent[e] != e:
+            parent[e] = parent[parent[e]]
+            e = parent[e]
+        return e
+    owner = {}
+    estset = set(est)
+    for eq, (_, cols) in eqs.items():
+        for p in cols:
+            if p in estset:
+                if p in owner:
+                    parent[root(eq)] = root(owner[p])
+                else:
+                    owner[p] = eq
+    groups: dict = {}
+    for eq in eqs:
+        groups.setdefault(root(eq), []).append(eq)
+    return list(groups.values())
+
+
+def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None) -> Fit:
+    """Estimate the parameters of ``model`` with ``effects`` by linear least squares.
+
+    Equations that share no estimated parameter are independent least-squares blocks; with
+    ``base`` (an earlier fit on the same record) a block whose equations are unchanged (same
+    columns, checked by content for the parallel-filtered models) is taken over from ``base``
+    instead of being solved again. The estimates are the same either way.
+    """
+    effects = tuple(effects)
+    n = sig["t"].size
+    trim = int(trim)
+    if trim < 0 or 2 * trim >= n - 10:
+        raise ValueError(f"trim: {trim} leaves too few of the {n} samples")
+    keep = slice(trim, n - trim)
+    s, eqs = design(model, sig, effects)
+    names = []
+    for _, cols in eqs.values():
+        names += [p for p in cols if p not in names]
+    est = [p for p in names if p not in model.fixed]
+    sigs = s.get("_signatures")
+    weights = dict(sig.get("_eq_weights") or {})
+    if base is not None and base.weights != weights:
+        base = None
+    bsigs = base.signals.get("_signatures") if base is not None else None
+    # Normal equations per block, assembled equation by equation (each equation holds only
+    # its own columns), formed with einsum (single-threaded: on a busy machine a threaded BLAS
+    # on a tall matrix is 10x slower), solved on unit-norm columns so the small systems stay
+    # well conditioned.
+    theta = dict(model.fixed)
+    resid, conds = {}, []
+    for comp in _components(eqs, est):
+        if (sigs is not None and bsigs is not None and base.keep == keep
+                and all(bsigs.get(eq) == sigs[eq] for eq in comp)):
+            for eq in comp:
+                resid[eq] = base.residuals[eq]
+                for p in base.columns.get(eq, []):
+                    theta[p] = base.theta[p]
+            continue
+        ps_all = [p for p in est if any(p in eqs[eq][1] for eq in comp)]
+        index = {p: j for j, p in enumerate(ps_all)}
+        k = len(ps_all)
+        A = np.zeros((k, k))
+        b = np.zeros(k)
+        blocks = []
+        for eq in comp:
+            y, cols = eqs[eq]
+            y = np.broadcast_to(np.asarray(y, dtype=float), (n,))[keep].copy()
+            for p, c in cols.items():
+                if p in model.fixed:
+                    y -= model.fixed[p] * np.asarray(c, dtype=float)[keep]
+            ps = [p for p in cols if p in index]
+            X = np.empty((y.size, len(ps)))
+            for j, p in enumerate(ps):
+                X[:, j] = np.broadcast_to(np.asarray(cols[p], dtype=float), (n,))[keep]
+            if not (np.all(np.isfinite(X)) and np.all(np.isfinite(y))):
+                raise ValueError("signals: the regressors contain NaN or Inf")
+            ix = np.array([index[p] for p in ps], dtype=int)
+            w2 = weights.get(eq, 1.0) ** 2
+            A[np.ix_(ix, ix)] += w2 * np.einsum("ij,ik->jk", X, X)
+            b[ix] += w2 * np.einsum("ij,i->j", X, y)
+            blocks.append((eq, y, X, ix))
+        scale = np.sqrt(np.diag(A)).copy()
+        scale[scale == 0] = 1.0
+        As = A / np.outer(scale, scale)
+        th = np.linalg.lstsq(As, b / scale, rcond=None)[0] / scale if k else np.zeros(0)
+        if k:
+            sv = np.sqrt(np.maximum(np.linalg.eigvalsh(As)[::-1], 0.0))
+            conds.append(float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf"))
+        theta.update(zip(ps_all, map(float, th)))
+        for eq, y, X, ix in blocks:
+            resid[eq] = y - np.einsum("ij,j->i", X, th[ix])
+    if base is not None and len(conds) < len(_components(eqs, est)):
+        conds.append(base.cond)
+    resid = {eq: resid[eq] for eq in eqs}
+    refs = {eq: _reference(model, eq, s, theta, eqs[eq][0], n, keep) for eq in eqs}
+    return Fit(model, effects, theta, est, resid, refs, s, keep, max(conds) if conds else 1.0,
+               {eq: [p for p in cols if p in est] for eq, (_, cols) in eqs.items()}, weights)
+
+
+def set_equation_weights(sig: dict, fitted: Fit) -> dict:
+    """Store IDIM-WLS weights in the prepared signals ``sig``: each equation's weight is
+    1 / the RMS of its residual in ``fitted`` (scaled so the largest weight is 1); later
+    :func:`fit` calls on ``sig`` use them. Returns the weights."""
+    rms = {eq: float(np.sqrt(np.mean(r ** 2))) for eq, r in fitted.residuals.items()}
+    pos = [v for v in rms.values() if v > 0]
+    floor = min(pos) if pos else 1.0
+    w = {eq: floor / max(v, floor) for eq, v in rms.items()}
+    # errors-in-variables equations (regressors built from noisy twice-differentiated signals)
+    # get a further factor: parameters they share with clean equations come from the clean ones
+    for eq in getattr(fitted.model, "eiv_equations", ()):
+        if eq in w:
+            w[eq] *= float(getattr(fitted.model, "eiv_weight", 1.0))
+    sig["_eq_weights"] = w
+    return w
+
+
+# ----------------------------------------------------------------------------------------
+# free-run simulation
+# ----------------------------------------------------------------------------------------
+def _state(model, pos, vel, acc, u: dict, extra: dict, t: float, k: int = 0,
+           pre: dict | None = None) -> dict:
+    s = {"t": t, "extra": extra, "k": k, "precomputed": pre or {}}
+    s.update(u)
+    for p, x, v, a in zip(model.positions, pos, vel, acc):
+        s[p], s[p + "_d"], s[p + "_dd"] = x, v, a
+    return model.augment(s)
+
+
+def _eq_error(model, effects, theta, s) -> np.ndarray:
+    for e in effects:
+        s = e.transform_state(s, model)
+    eqs = {k: (y, dict(c)) for k, (y, c) in model.equations(s).items()}
+    for e in effects:
+        for eq, cols in e.regressors(s, model).items():
+            eqs[eq][1].update(cols)
+    return np.array([float(y) - sum(theta[p] * float(c) for p, c in cols.items())
+                     for y, cols in eqs.values()])
+
+
+def simulate(fitted: Fit, t, inputs: dict, x0=None, v0=None, extra: dict | None = None,
+             substeps: int | None = None, precomputed: dict | None = None) -> dict:
+    """Free-run the fitted model from ``inputs`` alone; returns ``{position: array}``.
+
+    ``x0`` and ``v0`` are the initial positions and velocities (default: first input-record
+    values given in ``inputs`` for positions, zero velocity). ``precomputed`` maps an effect
+    key to ``{parameter: column}`` over the same samples, for effects whose columns need the
+    whole record (``arm_coupling``: evaluated from the measured signals).
+    """
+    model, effects, theta = fitted.model, fitted.effects, fitted.theta
+    t = as_time(t)
+    n = t.size
+    u_all = {"t": t}
+    for name in model.inputs:
+        if name not in inputs:
+            raise ValueError(f"inputs: missing {name!r}")
+        u_all[name] = as_signal(inputs[name], f"inputs[{name}]", n)
+    ex_all = {k: as_signal(v, f"extra[{k}]", n) for k, v in (extra or {}).items()}
+    for e in effects:
+        u_all = e.transform_inputs(u_all, model)
+    npos = len(model.positions)
+    if x0 is None:
+        x0 = [float(as_signal(inputs[p], p)[0]) if p in inputs else 0.0 for p in model.positions]
+    x = np.array(x0, dtype=float).reshape(npos)
+    v = np.zeros(npos) if v0 is None else np.array(v0, dtype=float).reshape(npos)
+    if not (np.all(np.isfinite(x)) and np.all(np.isfinite(v))):
+        raise ValueError("x0/v0: not finite")
+    dt = float(np.mean(np.diff(t)))
+
+    pre = precomputed or {}
+
+    def uk(k):
+        return {name: u_all[name][k] for name in model.inputs}, {c: a[k] for c, a in ex_all.items()}
+
+    u0, e0 = uk(0)
+    zero = np.zeros(npos)
+    base = _eq_error(model, effects, theta, _state(model, x, v, zero, u0, e0, t[0], 0, pre))
+    A = np.empty((npos, npos))   # e(acc) = base - A acc (the accelerations enter linearly)
+    for j in range(npos):
+        a = zero.copy()
+        a[j] = 1.0
+        A[:, j] = base - _eq_error(model, effects, theta, _state(model, x, v, a, u0, e0, t[0], 0, pre))
+    if np.linalg.cond(A) > 1e12:
+        raise ValueError("theta: the estimated inertia matrix is singular; cannot simulate")
+    Ainv = np.linalg.inv(A)
+
+    def accel(xx, vv, u, ex, tk, k=0, effs=effects):
+        return Ainv @ _eq_error(model, effs, theta, _state(model, xx, vv, zero, u, ex, tk, k, pre))
+
+    if substeps is None:  # |eigenvalues| of the linearised base model (effects left out)
+        J = np.zeros((2 * npos, 2 * npos))
+        J[:npos, npos:] = np.eye(npos)
+        a0 = accel(x, v, u0, e0, t[0], 0, ())
+        for j in range(2 * npos):
+            h = 1e-6
+            xx, vv = x.copy(), v.copy()
+            (xx if j < npos else vv)[j % npos] += h
+            J[npos:, j] = (accel(xx, vv, u0, e0, t[0], 0, ()) - a0) / h
+        lam = float(np.max(np.abs(np.linalg.eigvals(J))))
+        substeps = max(1, int(np.ceil(dt * lam / 0.5)))
+    substeps = int(substeps)
+    if substeps < 1:
+        raise ValueError("substeps: must be >= 1")
+    h = dt / substeps
+    out = np.empty((n, npos))
+    out[0] = x
+    for k in range(n - 1):
+        u, ex = uk(k)
+        for _ in range(substeps):
+            v = v + h * accel(x, v, u, ex, t[k], k)
+            x = x + h * v
+        if not np.all(np.isfinite(x)) or np.max(np.abs(x)) > 1e9:
+            raise ValueError(f"simulation diverged at t = {t[k]:g} s")
+        out[k + 1] = x
+    return {p: out[:, i] for i, p in enumerate(model.positions)}
+
+
+def free_run_error(fitted: Fit, sig: dict, substeps: int | None = None) -> tuple[dict, dict]:
+    """Simulate over the record of ``sig`` and compare with the measured positions.
+
+    The simulation starts at sample ``fitted.keep.start`` (after the derivative filter's edge).
+    Models with a ``free_run_window`` (s) (the flight models: a quadrotor is a chain of
+    integrators flown in closed loop, so a 10 s open-loop run only drifts) are simulated in
+    consecutive windows of that length, each started from the filtered measured state.
+    Returns (``{position: {"rmse", "nrmse"}}`` with nrmse = rmse / std(measured), simulated).
+    """
+    model = fitted.model
+    # start after the filter's edge (``trim`` samples), from the filtered position and velocity
+    n = sig["t"].size
+    k0 = min(fitted.keep.start, n - 3)
+    s_eff = apply_effects(model, sig, fitted.effects)
+    pre_all = {e.key: e.columns(s_eff) for e in fitted.effects if hasattr(e, "columns")}
+    window = getattr(model, "free_run_window", None)
+    step = n - k0 if window is None else max(3, int(round(window / sig["dt"])))
+    sim = {p: np.empty(n - k0) for p in model.positions}
+    for a in range(k0, n, step):
+        b = min(a + step, n)
+        if b - a < 3:   # a tail too short to simulate keeps the measured value
+            for p in model.positions:
+                sim[p][a - k0:] = sig[p][a:b]
+            break
+        x0 = [sig[p][a] for p in model.positions]
+        v0 = [sig[p + "_d"][a] for p in model.positions]
+        part = simulate(fitted, sig["t"][a:b], {u: sig[u][a:b] for u in model.inputs}, x0=x0,
+                        v0=v0, extra={k: v[a:b] for k, v in sig.get("extra", {}).items()},
+                        substeps=substeps,
+                        precomputed={key: {c: col[a:b] for c, col in cols.items()}
+                                     for key, cols in pre_all.items()})
+        for p in model.positions:
+            sim[p][a - k0:b - k0] = part[p]
+    out = {}
+    for p in model.positions:
+        e = sim[p] - sig[p + "_raw"][k0:]
+        sd = float(np.std(sig[p + "_raw"][k0:]))
+        rmse = float(np.sqrt(np.mean(e ** 2)))
+        out[p] = {"rmse": rmse, "nrmse": rmse / sd if sd > 0 else float("nan")}
+    return out, sim
+
+
+def apply_fit(fitted: Fit, sig: dict, trim: int | None = None) -> Fit:
+    """The equation errors of an already estimated model on another record (no re-estimation)."""
+    model = fitted.model
+    n = sig["t"].size
+    trim = fitted.keep.start if trim is None else int(trim)
+    if trim < 0 or 2 * trim >= n - 10:
+        raise ValueError(f"trim: {trim} leaves too few of the {n} samples")
+    keep = slice(trim, n - trim)
+    s, eqs = design(model, sig, fitted.effects)
+    resid, refs = {}, {}
+    for eq, (y, cols) in eqs.items():
+        pred = sum(fitted.theta[p] * np.asarray(c, dtype=float) for p, c in cols.items())
+        resid[eq] = (np.broadcast_to(np.asarray(y, dtype=float), (n,)) - pred)[keep]
+        refs[eq] = _reference(model, eq, s, fitted.theta, y, n, keep)
+    return Fit(model, fitted.effects, dict(fitted.theta), list(fitted.estimated), resid, refs, s,
+               keep, fitted.cond, dict(fitted.columns), dict(fitted.weights))

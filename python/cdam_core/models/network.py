@@ -1,0 +1,226 @@
+"""The BP network as a scikit-learn-style estimator: scaling, initial weights, training, NARX.
+
+`BPNetwork` runs on the C++ core and follows the model protocol (:mod:`.protocol`); the tests
+check it against ``cdam_core.reference.BPNetwork``, an estimator written on the numpy twin.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from cdam_core import _core
+from cdam_core.base.checks import as_2d, finite_float, positive_int, same_rows
+from cdam_core.base.orders import parse_orders
+from cdam_core.models.protocol import Model
+from cdam_core.models.schema import field_array
+from cdam_core.preprocess import MinMaxScaler
+
+__all__ = ["BPNetwork", "hidden_node_candidates"]
+
+
+def hidden_node_candidates(n_inputs: int, n_outputs: int, a_values=range(1, 11)) -> list[int]:
+    """Hidden-node rule h = sqrt(i + m) + a, rounded half up, for each a (the paper's section 3.1)."""
+    n_inputs = positive_int(n_inputs, "n_inputs")
+    n_outputs = positive_int(n_outputs, "n_outputs")
+    out = []
+    for a in a_values:
+        h = int(math.floor(math.sqrt(n_inputs + n_outputs) + a + 0.5))
+        if h >= 1 and h not in out:
+            out.append(h)
+    if not out:
+        raise ValueError("a_values: gives no hidden-node count >= 1")
+    return out
+
+
+class BPNetwork(Model):
+    """One-hidden-layer BP network (tansig or logsig hidden, linear output) on scaled data.
+
+    Parameters follow MATLAB's trainlm (``epochs``, ``goal``, ``mu``, ``mu_dec``, ``mu_inc``,
+    ``mu_max``, ``min_grad``, ``max_fail``); ``trainer="gd"`` is plain gradient-descent BP with
+    learning rate ``lr``. ``hidden="auto"`` searches the rule h = sqrt(i + m) + a, a = 1..10, and
+    keeps the lowest training MSE. ``narx=(na, nb, nk)`` makes a NARX model (lagged outputs and
+    inputs as regressors). Inputs and outputs are min-max scaled to [-1, 1] on the training data;
+    the MSE the trainers report is in those normalised units. Initial weights, when ``theta0`` is
+    not given to ``fit``, are uniform in [-1, 1] drawn in flat order from ``Rng(seed)``. With
+    ``validation_fraction`` > 0 the last part of the training record stops LM early (max_fail).
+    """
+
+    kind = "bp_network"
+
+    def __init__(self, hidden=20, activation="tansig", trainer="lm", *, epochs=1000, goal=0.0,
+                 mu=1e-3, mu_dec=0.1, mu_inc=10.0, mu_max=1e10, min_grad=1e-7, max_fail=6,
+                 lr=0.01, validation_fraction=0.0, narx=None, seed=0, threads=2):
+        if activation not in ("tansig", "logsig"):
+            raise ValueError(f"activation: unknown {activation!r}; use 'tansig' or 'logsig'")
+        if trainer not in ("lm", "gd"):
+            raise ValueError(f"trainer: unknown {trainer!r}; use 'lm' or 'gd'")
+        if hidden != "auto":
+            hidden = positive_int(hidden, "hidden")
+        self.hidden = hidden
+        self.activation = activation
+        self.trainer = trainer
+        self.epochs = positive_int(epochs, "epochs", minimum=0)
+        self.goal = finite_float(goal, "goal", minimum=0.0)
+        self.mu = finite_float(mu, "mu", minimum=0.0, strict=True)
+        self.mu_dec = finite_float(mu_dec, "mu_dec", minimum=0.0, strict=True)
+        self.mu_inc = finite_float(mu_inc, "mu_inc", minimum=1.0, strict=True)
+        self.mu_max = finite_float(mu_max, "mu_max", minimum=0.0, strict=True)
+        self.min_grad = finite_float(min_grad, "min_grad", minimum=0.0)
+        self.max_fail = positive_int(max_fail, "max_fail")
+        self.lr = finite_float(lr, "lr", minimum=0.0, strict=True)
+        self.validation_fraction = finite_float(validation_fraction, "validation_fraction", minimum=0.0)
+        if self.validation_fraction >= 1.0:
+            raise ValueError("validation_fraction: must be < 1")
+        self.narx = tuple(parse_orders(narx)) if narx is not None else None
+        self.seed = positive_int(seed, "seed", minimum=0)
+        self.threads = positive_int(threads, "threads")
+
+    # ---- helpers ----
+    @property
+    def t0(self) -> int:
+        return 0 if self.narx is None else parse_orders(self.narx).t0
+
+    @property
+    def dynamic(self) -> bool:
+        return self.narx is not None
+
+    def _design(self, Us, Ys):
+        """Network inputs and targets from scaled signals (NARX regressors when narx is set)."""
+        if self.narx is None:
+            return Us, Ys
+        na, nb, nk = self.narx
+        if Us.shape[0] <= self.t0:
+            raise ValueError(f"U: {Us.shape[0]} samples, NARX needs more than t0 = {self.t0}")
+        return _core.narx_regressors(Us, Ys, na, nb, nk), Ys[self.t0:]
+
+    def _initial_theta(self, n_in, h, n_out, dtype):
+        D = n_in * h + h + h * n_out + n_out
+        return np.asarray(_core.Rng(self.seed).uniform_array(D, -1.0, 1.0), dtype=dtype)
+
+    # ---- estimator API ----
+    def fit(self, U, Y, theta0=None, validation=None, callback=None) -> "BPNetwork":
+        """Train on inputs U (N, i) and outputs Y (N, m).
+
+        ``validation=(U_val, Y_val)`` early-stops LM (max_fail) and returns the best-validation
+        weights; ``callback(epoch, mse)`` is called each epoch (return False to stop).
+        """
+        U = as_2d(U, "U")
+        Y = as_2d(Y, "Y", dtype=U.dtype)
+        same_rows(U, Y, "U, Y")
+        val = None
+        if validation is not None:
+            if len(validation) != 2:
+                raise ValueError("validation: expected (U_val, Y_val)")
+            Uv = as_2d(validation[0], "U_val", dtype=U.dtype)
+            Yv = as_2d(validation[1], "Y_val", dtype=U.dtype)
+            same_rows(Uv, Yv, "U_val, Y_val")
+            if Uv.shape[1] != U.shape[1] or Yv.shape[1] != Y.shape[1]:
+                raise ValueError("validation: channel counts differ from U, Y")
+            val = (Uv, Yv)
+        elif self.validation_fraction > 0:
+            n_val = int(round(U.shape[0] * self.validation_fraction))
+            if n_val < 1 or U.shape[0] - n_val < 1:
+                raise ValueError("validation_fraction: leaves no training or no validation samples")
+            val = (U[-n_val:], Y[-n_val:])
+            U, Y = U[:-n_val], Y[:-n_val]
+        self.n_inputs_, self.n_outputs_ = U.shape[1], Y.shape[1]
+        self.scaler_x_ = MinMaxScaler().fit(U)
+        self.scaler_y_ = MinMaxScaler().fit(Y)
+        X, T = self._design(self.scaler_x_.transform(U), self.scaler_y_.transform(Y))
+        Xv = Tv = None
+        if val is not None:
+            Xv, Tv = self._design(self.scaler_x_.transform(val[0]), self.scaler_y_.transform(val[1]))
+        candidates = (hidden_node_candidates(X.shape[1], T.shape[1]) if self.hidden == "auto"
+                      else [self.hidden])
+        best = None
+        for h in candidates:
+            if theta0 is not None and len(candidates) == 1:
+                th0 = as_2d(np.ravel(theta0), "theta0", dtype=U.dtype)[:, 0]
+                D = X.shape[1] * h + h + h * T.shape[1] + T.shape[1]
+                if th0.shape[0] != D:
+                    raise ValueError(f"theta0: expected length {D}, got {th0.shape[0]}")
+            else:
+                th0 = self._initial_theta(X.shape[1], h, T.shape[1], U.dtype)
+            theta, hist = self._train(th0, X, T, h, Xv, Tv, callback)
+            final = hist["mse"][-1]
+            if best is None or final < best[0]:
+                best = (final, h, theta, hist)
+        _, self.hidden_, self.theta_, self.history_ = best
+        return self
+
+    def _train(self, theta0, X, T, h, Xv, Tv, callback):
+        k = _core
+        extra = {"threads": self.threads, "callback": callback}
+        if self.trainer == "gd":
+            return k.train_gd(theta0, X, T, h, self.activation, lr=self.lr, epochs=self.epochs,
+                              goal=self.goal, **extra)
+        return k.train_lm(theta0, X, T, h, self.activation, epochs=self.epochs, goal=self.goal,
+                          mu=self.mu, mu_dec=self.mu_dec, mu_inc=self.mu_inc, mu_max=self.mu_max,
+                          min_grad=self.min_grad, max_fail=self.max_fail, X_val=Xv, T_val=Tv,
+                          **extra)
+
+    def _fit(self, U, Y):
+        self.fit(U, Y)
+
+    def is_fitted(self) -> bool:
+        return getattr(self, "theta_", None) is not None
+
+    # ---- the protocol's prediction kernels (rows t0.. of one segment, physical units) ----
+    def _static(self, U):
+        U = U.astype(self.theta_.dtype, copy=False)
+        Ys = _core.mlp_forward(self.theta_, self.scaler_x_.transform(U), self.hidden_,
+                               self.n_outputs_, self.activation)
+        return self.scaler_y_.inverse_transform(Ys)
+
+    def _one_step(self, U, Y):
+        dt = self.theta_.dtype
+        X = _core.narx_regressors(self.scaler_x_.transform(U.astype(dt, copy=False)),
+                                  self.scaler_y_.transform(Y.astype(dt, copy=False)), *self.narx)
+        Ys = _core.mlp_forward(self.theta_, X, self.hidden_, self.n_outputs_, self.activation)
+        return self.scaler_y_.inverse_transform(Ys)
+
+    def _free_run(self, U, Y0):
+        dt, t0 = self.theta_.dtype, self.t0
+        Ys0 = (self.scaler_y_.transform(Y0.astype(dt, copy=False)) if t0
+               else np.zeros((0, self.n_outputs_), dt))
+        Ys = _core.narx_simulate(self.theta_, self.scaler_x_.transform(U.astype(dt, copy=False)),
+                                 Ys0, self.hidden_, self.activation, *self.narx)
+        return self.scaler_y_.inverse_transform(Ys)[t0:]
+
+    # ---- model file section ----
+    def to_dict(self) -> dict:
+        self._check_fitted()
+        return {"hidden": int(self.hidden_), "activation": self.activation,
+                "narx": list(self.narx) if self.narx is not None else None,
+                "n_inputs": int(self.n_inputs_), "n_outputs": int(self.n_outputs_),
+                "theta": [float(v) for v in np.asarray(self.theta_, dtype=np.float64)],
+                "x_min": [float(v) for v in self.scaler_x_.data_min_],
+                "x_max": [float(v) for v in self.scaler_x_.data_max_],
+                "y_min": [float(v) for v in self.scaler_y_.data_min_],
+                "y_max": [float(v) for v in self.scaler_y_.data_max_]}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "BPNetwork":
+        i, m, h = int(d["n_inputs"]), int(d["n_outputs"]), int(d["hidden"])
+        narx = parse_orders(d["narx"], "model.narx") if d["narx"] is not None else None
+        net = cls(hidden=h, activation=d["activation"], narx=narx)
+        n_in = i if narx is None else narx.n_regressors(i, m)
+        D = _core.mlp_num_params(n_in, h, m)
+        net.theta_ = field_array(d["theta"], "model.theta", (D,))
+        sx, sy = MinMaxScaler(), MinMaxScaler()
+        sx.data_min_ = field_array(d["x_min"], "model.x_min", (i,))
+        sx.data_max_ = field_array(d["x_max"], "model.x_max", (i,))
+        sy.data_min_ = field_array(d["y_min"], "model.y_min", (m,))
+        sy.data_max_ = field_array(d["y_max"], "model.y_max", (m,))
+        for name, s in (("x", sx), ("y", sy)):
+            if np.any(s.data_max_ < s.data_min_):
+                raise ValueError(f"model.{name}_max: below {name}_min")
+        net.hidden_, net.n_inputs_, net.n_outputs_ = h, i, m
+        net.scaler_x_, net.scaler_y_ = sx, sy
+        net.history_ = None
+        return net
+
+    def parameters(self) -> dict:
+        self._check_fitted()
+        return {f"theta[{k}]": (float(v), None) for k, v in enumerate(self.theta_)}

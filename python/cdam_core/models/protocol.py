@@ -1,0 +1,210 @@
+"""The one model protocol every identified model follows.
+
+A model maps inputs U (N, i) to outputs Y (N, m). It is fitted with ``fit(U, Y)`` and predicts
+with ``predict(U, Y, mode, k, segments)``:
+
+- ``mode="one_step"``: y(t) from the measured outputs before t (a static model ignores Y);
+- ``mode="k_step"``: y(t) from the measured outputs up to t - k, the model's own predictions
+  between (k = 1 is one-step; k >= the record length is free run);
+- ``mode="free_run"``: from the first ``t0`` measured rows only.
+
+``segments`` splits the rows into records laid end to end (a list of lengths, or of (start,
+stop) row ranges that tile 0..N): no prediction crosses a seam; each segment starts again from
+its own first ``t0`` measured rows, which are returned as measured (as are the first t0 + k - 1
+rows of a k-step prediction). ``parameters()`` gives every parameter with its standard
+deviation where the estimator defines one (None otherwise). ``to_dict()`` / ``from_dict()`` is
+the model file's ``model`` section (plain numbers and strings; see :mod:`.file`).
+
+Subclasses implement ``_fit``, ``_one_step`` (rows t >= t0 from rows t - t0 .. t of one
+segment), ``_free_run`` and the dictionary pair; k-step prediction is derived here from the
+one-step predictor (exact for any model whose one-step row t depends on rows t - t0 .. t only).
+"""
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from typing import ClassVar
+
+import numpy as np
+
+from cdam_core.base.checks import as_2d, positive_int
+
+__all__ = ["Model", "MODES", "segment_bounds", "Parameter"]
+
+MODES = ("one_step", "k_step", "free_run")
+
+Parameter = tuple  # (value, std or None)
+
+
+def segment_bounds(segments, n: int) -> list[tuple[int, int]]:
+    """(start, stop) row ranges from ``segments`` (None, lengths or ranges) tiling 0..n."""
+    if segments is None:
+        return [(0, n)]
+    try:
+        items = list(segments)
+    except TypeError:
+        raise ValueError("segments: expected a list of lengths or of (start, stop) pairs") from None
+    if not items:
+        raise ValueError("segments: empty list")
+    bounds = []
+    if all(isinstance(s, (int, np.integer)) and not isinstance(s, bool) for s in items):
+        start = 0
+        for k, length in enumerate(items):
+            if length < 1:
+                raise ValueError(f"segments[{k}]: length must be >= 1, got {length}")
+            bounds.append((start, start + int(length)))
+            start += int(length)
+    else:
+        for k, s in enumerate(items):
+            try:
+                a, b = (int(v) for v in s)
+            except (TypeError, ValueError):
+                raise ValueError(f"segments[{k}]: expected (start, stop), got {s!r}") from None
+            bounds.append((a, b))
+    pos = 0
+    for k, (a, b) in enumerate(bounds):
+        if a != pos or b <= a:
+            raise ValueError(f"segments[{k}]: ({a}, {b}) does not continue the tiling at row {pos}")
+        pos = b
+    if pos != n:
+        raise ValueError(f"segments: cover {pos} rows, the data has {n}")
+    return bounds
+
+
+class Model(ABC):
+    """Base of every model kind (see the module doc)."""
+
+    kind: ClassVar[str] = ""
+
+    @property
+    def dynamic(self) -> bool:
+        """False for a static map (predictions ignore Y)."""
+        return True
+
+    # -- fitted state every kind sets ------------------------------------------------------
+    n_inputs_: int
+    n_outputs_: int
+
+    @property
+    def t0(self) -> int:
+        """Measured output rows a prediction starts from (0 for a static map)."""
+        return 0
+
+    def is_fitted(self) -> bool:
+        return getattr(self, "n_outputs_", None) is not None
+
+    def _check_fitted(self):
+        if not self.is_fitted():
+            raise ValueError(f"{type(self).__name__}: not fitted; call fit(U, Y) first")
+
+    # -- the protocol ------------------------------------------------------------------------
+    def fit(self, U, Y):
+        """Fit on inputs U (N, i) and outputs Y (N, m); returns self."""
+        U = as_2d(U, "U")
+        Y = as_2d(Y, "Y")
+        if U.shape[0] != Y.shape[0]:
+            raise ValueError(f"U, Y: mismatched sample counts ({U.shape[0]} and {Y.shape[0]})")
+        self._fit(U, Y)
+        return self
+
+    def predict(self, U, Y=None, mode: str = "one_step", k: int = 1, segments=None) -> np.ndarray:
+        """Outputs (N, m) in physical units; see the module doc for ``mode``, ``k``, ``segments``."""
+        self._check_fitted()
+        if mode not in MODES:
+            raise ValueError(f"mode: unknown {mode!r}; use one of {', '.join(MODES)}")
+        U = as_2d(U, "U")
+        if U.shape[1] != self.n_inputs_:
+            raise ValueError(f"U: expected {self.n_inputs_} columns, got {U.shape[1]}")
+        if not self.dynamic:
+            return self._static(U)
+        if Y is None:
+            raise ValueError("Y: a dynamic model needs the measured outputs (at least the first "
+                             "t0 rows of each segment)")
+        Y = as_2d(Y, "Y")
+        if Y.shape[1] != self.n_outputs_:
+            raise ValueError(f"Y: expected {self.n_outputs_} columns, got {Y.shape[1]}")
+        if Y.shape[0] != U.shape[0]:
+            raise ValueError(f"U, Y: mismatched sample counts ({U.shape[0]} and {Y.shape[0]})")
+        if mode == "k_step":
+            k = positive_int(k, "k")
+        P = np.array(Y, dtype=np.float64, copy=True)
+        for a, b in segment_bounds(segments, U.shape[0]):
+            if b - a <= self.t0:
+                continue                       # too short to predict: measured rows only
+            u, y = U[a:b], Y[a:b]
+            if mode == "one_step":
+                P[a + self.t0:b] = self._one_step(u, y)
+            elif mode == "free_run":
+                P[a + self.t0:b] = self._free_run(u, y[:self.t0])
+            else:
+                P[a:b] = self._k_step(u, y, k)
+        return P
+
+    def score(self, U, Y, mode: str = "one_step", k: int = 1, segments=None) -> float:
+        """Coefficient of determination R^2 averaged over outputs (as scikit-learn), skipping
+        the measured rows of each segment."""
+        Y = as_2d(Y, "Y")
+        P = self.predict(U, Y, mode=mode, k=k, segments=segments)
+        skip = self.t0 + (k - 1 if mode == "k_step" else 0)
+        keep = np.zeros(len(Y), bool)
+        for a, b in segment_bounds(segments, len(Y)):
+            keep[a + skip:b] = True
+        yt, pt = Y[keep], P[keep]
+        ss_res = np.sum((yt - pt) ** 2, axis=0)
+        ss_tot = np.sum((yt - yt.mean(axis=0)) ** 2, axis=0)
+        r2 = np.where(ss_tot > 0, 1.0 - ss_res / np.where(ss_tot > 0, ss_tot, 1.0), 0.0)
+        return float(np.mean(r2))
+
+    def parameters(self) -> dict[str, Parameter]:
+        """{name: (value, standard deviation or None)}."""
+        return {}
+
+    # -- to implement ------------------------------------------------------------------------
+    @abstractmethod
+    def _fit(self, U: np.ndarray, Y: np.ndarray) -> None: ...
+
+    def _static(self, U: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
+    def _one_step(self, U: np.ndarray, Y: np.ndarray) -> np.ndarray:
+        """Rows t0.. of one segment from measured rows (U, Y of the segment)."""
+        raise NotImplementedError
+
+    def _free_run(self, U: np.ndarray, Y0: np.ndarray) -> np.ndarray:
+        """Rows t0.. of one segment from its inputs and first t0 measured rows Y0."""
+        raise NotImplementedError
+
+    def _k_step(self, U: np.ndarray, Y: np.ndarray, k: int) -> np.ndarray:
+        """All rows of one segment: every target t >= t0 + k - 1 gets its own window of t0 + k
+        rows starting at t - k - t0 + 1; the k steps of all windows run together, one
+        vectorised one-step call per step (the first t0 + k - 1 rows stay measured)."""
+        t0 = self.t0
+        n, m = Y.shape
+        first = t0 + k - 1
+        P = Y.copy()
+        if n <= first:
+            return P
+        targets = np.arange(first, n)
+        idx = (targets - first)[:, None] + np.arange(t0 + k)[None, :]
+        Uw, Zw = U[idx], Y[idx].copy()
+        W = len(targets)
+        for j in range(k):
+            u = np.ascontiguousarray(Uw[:, j:j + t0 + 1].reshape(W * (t0 + 1), -1))
+            z = np.ascontiguousarray(Zw[:, j:j + t0 + 1].reshape(W * (t0 + 1), m))
+            Zw[:, t0 + j] = self._windows_one_step(u, z, W, t0)
+        P[targets] = Zw[:, -1]
+        return P
+
+    def _windows_one_step(self, u, z, W, t0):
+        """One-step prediction of the last row of each of W stacked windows of t0 + 1 rows."""
+        # windows laid end to end: the last row of window w is row w (t0 + 1) + t0 of the
+        # stack and its one-step prediction uses exactly that window; _one_step returns the
+        # rows from t0 on, so it sits at index w (t0 + 1)
+        full = self._one_step(u, z)
+        return full[np.arange(W) * (t0 + 1)]
+
+    @abstractmethod
+    def to_dict(self) -> dict: ...
+
+    @classmethod
+    @abstractmethod
+    def from_dict(cls, d: dict) -> "Model": ...

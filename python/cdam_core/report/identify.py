@@ -1,0 +1,154 @@
+"""The identification report: Markdown with PNG figures (matplotlib, Agg backend).
+
+Tables 2/3-style per output and algorithm (mean and std of Pearson r, RMSE and NRMSE over seeds,
+per evaluation record and mode), final fitness (adaptation value 1 / (1 + MSE)) and run times,
+the rank-sum verdicts, convergence curves (the paper's Fig. 11: adaptation value of the best
+individual per iteration, mean over seeds with a min-max band) and predicted against measured
+time series of the best-fitness model of each algorithm (Figs. 12-15).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from cdam_core.base.metrics import adaptation_value
+from cdam_core.identify.pipelines import preprocess
+
+__all__ = ["write_report"]
+
+_LABEL = {"iboa": "IBOA-BP", "boa": "BOA-BP", "cabc": "CABC-BP", "bp": "BP"}
+
+
+def _fmt(a, digits=4):
+    if a["mean"] is None:
+        return "n/a"
+    return f"{a['mean']:.{digits}f} ± {a['std']:.{digits}f}"
+
+
+def _convergence_figure(result, path):
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(6.5, 4))
+    for algo, data in result["algorithms"].items():
+        curves = [r["curve_mse"] for r in data["runs"] if r["curve_mse"] is not None]
+        if not curves:
+            continue
+        fit = adaptation_value(np.asarray(curves))
+        it = np.arange(fit.shape[1])
+        ax.plot(it, fit.mean(axis=0), label=_LABEL[algo])
+        ax.fill_between(it, fit.min(axis=0), fit.max(axis=0), alpha=0.2)
+    ax.set_xlabel("iteration")
+    ax.set_ylabel("adaptation value 1 / (1 + MSE)")
+    ax.set_title("Convergence of the initial-weight search (mean, min-max over seeds)")
+    ax.grid(True, alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _prediction_figure(models, record, names, passes, t, path, title):
+    import matplotlib.pyplot as plt
+    U, Y = preprocess(record[0], record[1], passes)
+    m = Y.shape[1]
+    fig, axes = plt.subplots(m, 1, figsize=(8, 1.8 * m + 0.6), sharex=True, squeeze=False)
+    x = t if t is not None and len(t) == len(Y) else np.arange(len(Y))
+    for k in range(m):
+        axes[k, 0].plot(x, Y[:, k], "k", lw=1.2, label="measured")
+    for algo, model in models.items():
+        if model.narx is not None:
+            P = model.predict(U, Y, mode="free_run")
+        else:
+            P = model.predict(U)
+        for k in range(m):
+            axes[k, 0].plot(x, P[:, k], lw=0.9, label=_LABEL[algo])
+    for k in range(m):
+        axes[k, 0].set_ylabel(names[k])
+        axes[k, 0].grid(True, alpha=0.3)
+    axes[0, 0].legend(loc="upper right", fontsize=7, ncol=len(models) + 1)
+    axes[-1, 0].set_xlabel("t (s)" if t is not None else "sample")
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _times_figure(result, path):
+    import matplotlib.pyplot as plt
+    s = result["summary"]
+    algos = list(s)
+    fig, ax = plt.subplots(figsize=(5, 3))
+    ax.bar([_LABEL[a] for a in algos], [s[a]["seconds"]["mean"] for a in algos],
+           yerr=[s[a]["seconds"]["std"] for a in algos], capsize=4)
+    ax.set_ylabel("run time per seed (s)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def write_report(comparison, directory, *, records: dict | None = None,
+                 times: dict | None = None, title: str = "System identification report") -> Path:
+    """Write ``report.md`` and its PNG figures into ``directory``; returns the Markdown path.
+
+    ``comparison``: a :class:`cdam_core.evaluate.Comparison`. ``records`` ({name: (U, Y)})
+    draws predicted-against-measured figures with the best model of each algorithm
+    (``comparison.models``); ``times`` ({name: t}) gives their time axes.
+    """
+    result = comparison.result
+    import matplotlib
+    matplotlib.use("Agg")
+    d = Path(directory)
+    d.mkdir(parents=True, exist_ok=True)
+    cfg, names, summary = result["config"], result["outputs"], result["summary"]
+    lines = [f"# {title}", "",
+             f"Seeds per algorithm: {len(result['seeds'])}. Network: {cfg['hidden']} hidden "
+             f"({cfg['activation']}), NARX orders {cfg['narx'] or 'none (static map)'}; "
+             f"smoothing passes {cfg['smoothing_passes']}; population {cfg['population']}, "
+             f"Tmax {cfg['iterations']}, SP {cfg['switch_probability']}, CABC limit "
+             f"{cfg['cabc_limit']}; LM at most {cfg['lm_epochs']} epochs, goal {cfg['lm_goal']}."
+             + (f" Model: hybrid (linear ARX + the algorithm's network on its residual), "
+                f"{cfg.get('features', 'raw')} features." if cfg.get("model") == "hybrid" else ""),
+             "", "Fitness = adaptation value 1 / (1 + MSE), MSE the final training error in "
+             "normalised units. Metrics compare back-normalised predictions with the "
+             "preprocessed (smoothed) measurements; NRMSE = RMSE / std(measured).", "",
+             "## Fitness and run time (mean ± std over seeds)", "",
+             "| algorithm | fitness after LM | fitness of the optimiser's best | run time (s) | "
+             "optimiser time (s) |", "|---|---|---|---|---|"]
+    for algo, s in summary.items():
+        lines.append(f"| {_LABEL[algo]} | {_fmt(s['fitness'])} | {_fmt(s['optimiser_fitness'])}"
+                     f" | {_fmt(s['seconds'], 3)} | {_fmt(s['optimise_seconds'], 3)} |")
+    algos = list(summary)
+    first = next(iter(summary.values()))
+    for rec, modes in first["records"].items():
+        for mode in modes:
+            for metric in ("r", "rmse", "nrmse"):
+                lines += ["", f"## {rec}, {mode.replace('_', '-')}: {metric} per output", "",
+                          "| output | " + " | ".join(_LABEL[a] for a in algos) + " |",
+                          "|---" * (len(algos) + 1) + "|"]
+                for out in names:
+                    lines.append(f"| {out} | " + " | ".join(
+                        _fmt(summary[a]["records"][rec][mode][out][metric]) for a in algos) + " |")
+    if result.get("rank_sum"):
+        lines += ["", "## Does IBOA beat the others? (one-sided Mann-Whitney rank-sum, p < 0.05)",
+                  "", "| against | score | p-value | IBOA better |", "|---|---|---|---|"]
+        for other, entry in result["rank_sum"].items():
+            for score, v in entry.items():
+                lines.append(f"| {_LABEL[other]} | {score} | {v['p_value']:.3g} | "
+                             f"{'yes' if v['iboa_better'] else 'no'} |")
+    lines += ["", "## Figures", ""]
+    if any(r["curve_mse"] for a in result["algorithms"].values() for r in a["runs"]):
+        _convergence_figure(result, d / "convergence.png")
+        lines += ["![convergence](convergence.png)", ""]
+    _times_figure(result, d / "run_times.png")
+    lines += ["![run times](run_times.png)", ""]
+    models = comparison.models
+    for rec, data in (records or {}).items():
+        if not models:
+            break
+        fname = f"predicted_{rec}.png"
+        _prediction_figure(models, data, names, cfg["smoothing_passes"], (times or {}).get(rec),
+                           d / fname, f"{rec}: measured and predicted (best seed per algorithm)")
+        lines += [f"![{rec}]({fname})", ""]
+    md = d / "report.md"
+    md.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return md

@@ -1,0 +1,169 @@
+"""The residual analysis as JSON and as a Markdown report with PNG figures (matplotlib, Agg)."""
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+
+from cdam_core.base.jsonio import plain
+
+from cdam_core.residual import diagnostics as dg
+from cdam_core.residual.selection import Selection
+
+
+def to_json(sel: Selection) -> dict:
+    """The issue's JSON: model, declared_error, findings, residual_white_after, unexplained.
+
+    Error dictionaries are keyed by channel: equation channels (``tau``, ``tau_m``, ``tau_l``)
+    hold the equation error (nrmse = ||e|| / ||measured torque||), output channels (``q``,
+    ``theta_m``) the free-run error (nrmse = rmse / std(measured)). Extra keys:
+    ``declared_parameters``, ``final_parameters``, ``error_final`` (the final model's errors),
+    ``removed_in_backward_pass`` (claims withdrawn when re-tested with all others) and
+    ``settings``.
+    """
+    model = sel.model
+    findings = []
+    for st in sel.steps:
+        eff = st.candidate.effect
+        findings.append({"effect": eff.name, "channel": eff.channel,
+                         "parameters": eff.parameters(st.candidate.fit.theta, model),
+                         "error_before": st.error_before, "error_after": st.error_after,
+                         "evidence": st.evidence})
+    filt = sel.declared.signals.get("filter")
+    settings = dict(sel.settings)
+    settings["derivative_filter"] = filt.describe() if filt is not None else None
+    return plain({
+        "model": model.name,
+        "declared_error": sel.declared_error,
+        "findings": findings,
+        "residual_white_after": sel.white_after,
+        "unexplained": sel.unexplained,
+        "error_final": sel.final_error,
+        "removed_in_backward_pass": sel.removed,
+        "declared_parameters": sel.declared.theta,
+        "final_parameters": sel.final.theta,
+        "settings": settings,
+    })
+
+
+def _fmt_err(err: dict) -> str:
+    return "; ".join(f"{k}: RMSE {v['rmse']:.4g}, NRMSE {100 * v['nrmse']:.2f} %"
+                     for k, v in err.items())
+
+
+def _figure_finding(path: Path, sel: Selection, i: int) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    st = sel.steps[i]
+    eff, model = st.candidate.effect, sel.model
+    ch = eff.display_equation(st.before.residuals)
+    r0, r1 = st.before.residuals[ch], st.candidate.fit.residuals[ch]
+    t = st.before.signals["t"][st.before.keep]
+    u = st.before.signals[model.inputs[0]][st.before.keep]
+    reg = eff.regressor_signal(st.candidate.fit.signals, model)[st.before.keep]
+    fig, ax = plt.subplots(2, 2, figsize=(11, 7))
+    ax[0, 0].plot(t, r0, lw=0.6, label="before")
+    ax[0, 0].plot(t, r1, lw=0.6, label="after")
+    ax[0, 0].set(title=f"residual ({ch})", xlabel="t [s]")
+    ax[0, 0].legend()
+    for r, lab in ((r0, "before"), (r1, "after")):
+        ac = dg.autocorrelation(r, 25)
+        ax[0, 1].plot(ac["lags"], ac["acf"], "o-", ms=3, label=lab)
+    ax[0, 1].axhspan(-ac["band"], ac["band"], color="grey", alpha=0.3, label="99 % band")
+    ax[0, 1].set(title="residual autocorrelation", xlabel="lag [samples]")
+    ax[0, 1].legend()
+    for r, lab in ((r0, "before"), (r1, "after")):
+        cc = dg.cross_correlation(r, u, 25)
+        ax[1, 0].plot(cc["lags"], cc["ccf"], "o-", ms=3, label=lab)
+    ax[1, 0].axhspan(-cc["band"], cc["band"], color="grey", alpha=0.3)
+    ax[1, 0].set(title=f"residual / input ({model.inputs[0]}) cross-correlation", xlabel="lag")
+    ax[1, 0].legend()
+    step = max(1, r0.size // 4000)
+    ax[1, 1].plot(reg[::step], r0[::step], ".", ms=2)
+    ax[1, 1].set(title=f"{eff.key} regressor against residual before", xlabel="regressor",
+                 ylabel="residual")
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def _figure_spectrum(path: Path, sel: Selection) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fs = 1.0 / sel.declared.signals["dt"]
+    fig, ax = plt.subplots(figsize=(8, 4))
+    for lab, f_ in (("declared", sel.declared), ("final", sel.final)):
+        for ch, r in f_.residuals.items():
+            f, p = dg.spectrum(r, fs, 0.25)
+            ax.semilogy(f, p, label=f"{lab} {ch}")
+    for u in sel.unexplained:
+        ax.axvline(u["frequency_hz"], color="r", ls="--", lw=0.8)
+    ax.set(xlabel="frequency [Hz]", ylabel="PSD", title="residual spectrum (Welch)")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def write_report(sel: Selection, out_dir, title: str | None = None, source: str = "") -> Path:
+    """Write ``index.md``, ``residual.json`` and the PNG figures into ``out_dir``."""
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"out_dir: {out} exists and is not a folder")
+    out.mkdir(parents=True, exist_ok=True)
+    js = to_json(sel)
+    (out / "residual.json").write_text(json.dumps(js, indent=2))
+    lines = [f"# Residual analysis: {title or sel.model.name}", ""]
+    if source:
+        lines += [f"Data: {source}", ""]
+    lines += [f"Declared model `{sel.model.name}`; derivatives: "
+              f"{js['settings'].get('derivative_filter')}.", "",
+              "## Declared model", "", "| parameter | value |", "|---|---|"]
+    lines += [f"| {k} | {v:.6g} |" for k, v in sel.declared.theta.items()]
+    lines += ["", "| channel | RMSE | NRMSE |", "|---|---|---|"]
+    lines += [f"| {k} | {v['rmse']:.4g} | {100 * v['nrmse']:.2f} % |"
+              for k, v in sel.declared_error.items()]
+    lines += ["", "## Findings", ""]
+    if not sel.steps:
+        lines += ["No candidate effect is significant.", ""]
+    for i, (st, fjs) in enumerate(zip(sel.steps, js["findings"])):
+        png = f"finding_{i + 1}_{fjs['effect']}.png"
+        _figure_finding(out / png, sel, i)
+        ev = fjs["evidence"]
+        lines += [f"### {i + 1}. `{fjs['effect']}` on `{fjs['channel']}`", "",
+                  "Parameters: " + ", ".join(f"{k} = {v:.6g}" if isinstance(v, float) else
+                                             f"{k} = {v}" for k, v in fjs["parameters"].items()),
+                  "", "| channel | before RMSE | before NRMSE | after RMSE | after NRMSE |",
+                  "|---|---|---|---|---|"]
+        for k, b in fjs["error_before"].items():
+            a = fjs["error_after"][k]
+            lines.append(f"| {k} | {b['rmse']:.4g} | {100 * b['nrmse']:.2f} % | {a['rmse']:.4g} "
+                         f"| {100 * a['nrmse']:.2f} % |")
+        lines += ["", f"Evidence: ERR {ev['err']:.3g}, F = {ev['f_statistic']:.4g} on "
+                  f"({ev['added_parameters']}, N_eff = {ev['n_eff']:.0f}) -> p = {ev['p_value']:.3g}, "
+                  f"delta BIC {ev['delta_bic']:.4g}; Ljung-Box p before "
+                  f"{ev['ljung_box_before']['pvalue']:.3g}, after {ev['ljung_box_after']['pvalue']:.3g}.",
+                  "", f"![finding {i + 1}]({png})", ""]
+    lines += ["## After", "", f"Residual white (Ljung-Box, 25 lags, 1 %): "
+              f"{'yes' if sel.white_after else 'no'}.", ""]
+    lines += ["| parameter | value |", "|---|---|"]
+    lines += [f"| {k} | {v:.6g} |" for k, v in sel.final.theta.items()]
+    lines += ["", "## Unexplained structure", ""]
+    if sel.unexplained:
+        lines += ["| channel | frequency [Hz] | prominence [decades] |", "|---|---|---|"]
+        lines += [f"| {u['channel']} | {u['frequency_hz']:.1f} | {u['prominence_decades']:.2f} |"
+                  for u in sel.unexplained]
+        lines += ["", "No library effect explains these; they are reported, not fitted."]
+    else:
+        lines += ["None found (no spectral peak of 1 decade or more)."]
+    _figure_spectrum(out / "spectrum.png", sel)
+    lines += ["", "![spectrum](spectrum.png)", ""]
+    (out / "index.md").write_text("\n".join(lines))
+    return out / "index.md"

@@ -1,0 +1,41 @@
+"""The residual loop on arrays: fit the declared model, select the missing effects."""
+from __future__ import annotations
+
+from cdam_core.models.greybox.declared import DerivativeFilter
+from cdam_core.models.greybox.registry import get_model
+from cdam_core.models.greybox.effects import LIBRARY, candidates as library_candidates
+from cdam_core.residual.selection import Selection, select
+
+__all__ = ["analyse"]
+
+
+def analyse(model: str, t, signals: dict, extra: dict | None = None, fixed: dict | None = None,
+            cutoff_hz: float | None = None, alpha: float = 0.01, free_run: bool = True,
+            validation: tuple | None = None, options: dict | None = None,
+            max_steps: int | None = None, declared=()) -> Selection:
+    """Fit ``model`` to the signals, select missing effects, return the :class:`Selection`.
+
+    ``signals`` maps the model's signal names (``tau``, ``q`` / ``tau_m``, ``theta_m``, ``q`` /
+    the dataset's channel names for the flight models) to arrays; ``extra`` holds measured
+    channels left out of the model (``external_force`` candidates); ``validation`` = (t, signals)
+    of another record for the free-run errors; ``fixed``: known parameters (e.g. the weighed
+    mass ``m``, which ``payload_mass`` needs); ``declared``: library effect names the declared
+    model already holds (on every channel they apply to), e.g. the sidecar's model effects;
+    ``cutoff_hz``: derivative filter cutoff (default: the model's, 100 Hz for the axis models,
+    2 Hz for the flight models' body channels).
+    """
+    m = get_model(model, fixed)
+    if isinstance(declared, str):
+        declared = [declared]
+    for name in declared:
+        if name not in LIBRARY:
+            raise ValueError(f"declared: unknown effect {name!r} (known: {', '.join(LIBRARY)})")
+    filt = DerivativeFilter(cutoff_hz=m.default_cutoff_hz if cutoff_hz is None else cutoff_hz)
+    sig = m.prepare(t, signals, filt, extra)
+    val = None
+    if validation is not None:
+        val = m.prepare(validation[0], validation[1], sig["filter"], None)
+    cands = library_candidates(m, list((extra or {}).keys()), options)
+    dec = [c for c in cands if c.name in set(declared)]
+    return select(m, sig, cands, alpha=alpha, free_run=free_run, validation=val,
+                  max_steps=max_steps, declared_effects=dec)
