@@ -9,19 +9,19 @@ import json
 import shutil
 import subprocess
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from cdam_core import firmware as fw
+from cdam_core.record.realdata import shared_data_dir
 from cdam_core.models.file import save_model
 
 pytestmark = [pytest.mark.slow,
               pytest.mark.skipif(fw.toolchain_available() is not None,
                                  reason=f"firmware toolchain: {fw.toolchain_available()}")]
 
-DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "ardrone2"
+DATA = shared_data_dir() / "ardrone2"   # honours CDAM_SHARED_DATA
 
 
 def _flight_inputs():
@@ -39,11 +39,11 @@ def flight_model(tmp_path_factory):
     """A 6-20-8 tansig model scaled on the flight's channels (weights: the demo model's)."""
     U = _flight_inputs()
     demo = json.loads((fw.FIRMWARE_DIR / "generated" / "demo_model.json").read_text())["model"]
-    net = SimpleNamespace(
-        theta_=np.asarray(demo["theta"]), n_inputs_=6, n_outputs_=8, hidden_=20,
-        activation="tansig", narx=None,
-        scaler_x_=SimpleNamespace(data_min_=U.min(axis=0), data_max_=U.max(axis=0)),
-        scaler_y_=SimpleNamespace(data_min_=-np.ones(8), data_max_=np.ones(8)))
+    from cdam_core.models import BPNetwork
+    net = BPNetwork.from_dict({
+        "theta": demo["theta"], "n_inputs": 6, "n_outputs": 8, "hidden": 20,
+        "activation": "tansig", "narx": None, "x_min": U.min(axis=0).tolist(),
+        "x_max": U.max(axis=0).tolist(), "y_min": [-1.0] * 8, "y_max": [1.0] * 8})
     path = tmp_path_factory.mktemp("model") / "flight_model.json"
     save_model(path, net, inputs=["m1", "m2", "m3", "m4", "roll", "pitch"])
     return path, U
