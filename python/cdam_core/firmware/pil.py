@@ -13,6 +13,8 @@ import numpy as np
 from cdam_core.firmware.model import FirmwareModel, load_firmware_model
 from cdam_core.firmware.paths import FIRMWARE_DIR, QEMU
 
+REFERENCE_ID, DIAGNOSTIC_ID = 0x300, 0x3F0   # joint references in; loop diagnostics out
+
 
 def pid_config() -> dict:
     """The loop constants of firmware_stubs/include/fw/config.hpp (kDt, kKp, kKi, kKd, ...)."""
