@@ -17,7 +17,8 @@ __all__ = ["plain", "write_text_atomic", "write_json_atomic"]
 
 
 def plain(x):
-    """JSON-able plain data: numpy scalars and arrays to numbers and lists, non-finite to None."""
+    """JSON-able plain data: numpy scalars and arrays to numbers and lists, non-finite to None,
+    paths to strings."""
     if isinstance(x, dict):
         return {str(k): plain(v) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
@@ -31,22 +32,38 @@ def plain(x):
     if isinstance(x, (float, np.floating)):
         v = float(x)
         return v if math.isfinite(v) else None
+    if isinstance(x, Path):
+        return str(x)
     return x
 
 
 
+def _umask_mode() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
+_FILE_MODE = _umask_mode()
+
+
 def write_text_atomic(path, text: str) -> Path:
-    """Write ``text`` to ``path`` through a temporary file in the same folder and a rename."""
+    """Write ``text`` to ``path`` through a temporary file in the same folder (flushed to disk,
+    given the usual umask mode) and a rename: a reader sees the old file or the new, never half."""
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=str(path.parent or Path(".")), prefix=path.name + ".",
-                               suffix=".tmp")
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="") as f:
             f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.chmod(tmp, _FILE_MODE)      # mkstemp makes 0600
         os.replace(tmp, path)
     except BaseException:
-        if os.path.exists(tmp):
+        try:
             os.unlink(tmp)
+        except OSError:
+            pass
         raise
     return path
 

@@ -37,15 +37,7 @@ def k_step_predict(model, U, Y, k: int) -> np.ndarray:
     the first t0 rows are in one-step and free-run predictions; drop them before scoring.
     k = 1 equals the model's one-step prediction.
     """
-    U = np.asarray(U, dtype=np.float64)
-    Y = np.asarray(Y, dtype=np.float64)
-    if U.ndim != 2 or Y.ndim != 2 or len(U) != len(Y) or U.size == 0 or Y.size == 0:
-        raise ValueError(f"U, Y: expected non-empty (N, i) and (N, m) arrays with the same N, "
-                         f"got {U.shape} and {Y.shape}")
-    if not (np.all(np.isfinite(U)) and np.all(np.isfinite(Y))):
-        raise ValueError("U, Y: contain NaN or Inf")
-    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
-        raise ValueError(f"k: must be an integer >= 1, got {k!r}")
+    # shapes, NaN and k are checked by the protocol's predict
     if not getattr(model, "dynamic", False):
         raise ValueError("model: k-step prediction needs a dynamic (NARX-type) model")
-    return model.predict(U, Y, mode="k_step", k=int(k))
+    return model.predict(U, Y, mode="k_step", k=k)

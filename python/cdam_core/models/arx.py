@@ -16,10 +16,12 @@ import numpy as np
 from cdam_core.base.checks import as_2d
 from cdam_core.base.orders import Orders, parse_orders
 from cdam_core.models.protocol import Model
+from cdam_core.models.schema import field_array
 
 __all__ = ["ArxModel", "FEATURES", "physics_features", "arx_design", "lagged"]
 
 FEATURES = ("raw", "physics")
+N_PHYSICS = 8   # physics features of four motor commands (see physics_features)
 
 
 def physics_features(U, scale=None):
@@ -77,6 +79,11 @@ class ArxModel(Model):
     def t0(self) -> int:
         return self.orders.t0
 
+    @property
+    def n_features(self) -> int:
+        """Columns of f: the inputs (raw) or the physics features."""
+        return self.n_inputs_ if self.features == "raw" else N_PHYSICS
+
     def _features(self, U):
         return U if self.features == "raw" else physics_features(U, self.feature_scale_)[0]
 
@@ -124,9 +131,8 @@ class ArxModel(Model):
     def _coef_names(self):
         na, nb, _ = self.orders
         m = self.n_outputs_
-        nf = (self.coef_.shape[0] - 1 - na * m) // max(nb, 1) if nb else 0
         rows = [f"A[{{o}},{j + 1},{c}]" for j in range(na) for c in range(m)]
-        rows += [f"B[{{o}},{j},{c}]" for j in range(nb) for c in range(nf)]
+        rows += [f"B[{{o}},{j},{c}]" for j in range(nb) for c in range(self.n_features)]
         rows += ["c[{o}]"]
         return rows
 
@@ -154,9 +160,7 @@ class ArxModel(Model):
         return m
 
     def _load_arx(self, d: dict):
-        from cdam_core.models.schema import field_array
         self.n_inputs_, self.n_outputs_ = int(d["n_inputs"]), int(d["n_outputs"])
-        nf = self.n_inputs_ if self.features == "raw" else 8
         if self.features == "physics":
             if self.n_inputs_ != 4:
                 raise ValueError("model.n_inputs: physics features need 4 inputs")
@@ -165,6 +169,6 @@ class ArxModel(Model):
             if d.get("feature_scale") is not None:
                 raise ValueError("model.feature_scale: must be null for raw features")
             self.feature_scale_ = None
-        rows = self.orders.na * self.n_outputs_ + self.orders.nb * nf + 1
+        rows = self.orders.na * self.n_outputs_ + self.orders.nb * self.n_features + 1
         self.coef_ = field_array(d["coef"], "model.coef", (rows, self.n_outputs_))
         self.coef_std_ = field_array(d["coef_std"], "model.coef_std", (rows, self.n_outputs_))

@@ -109,6 +109,10 @@ def _upgrade_v1(doc: dict) -> dict:
             "meta": p.get("meta") or {}, "model": section}
 
 
+def _reject_constant(name: str):
+    raise ValueError(f"{name} is not a JSON number")
+
+
 def read_model_file(path) -> ModelFile:
     """Read, check and load a model file of any kind; ValueError naming the file and field."""
     path = Path(path)
@@ -121,25 +125,25 @@ def read_model_file(path) -> ModelFile:
     except (OSError, UnicodeDecodeError) as exc:
         raise ValueError(f"{path}: cannot read model file ({exc})") from None
     try:
-        doc = json.loads(text, parse_constant=lambda c: (_ for _ in ()).throw(
-            ValueError(f"{c} is not a JSON number")))
+        doc = json.loads(text, parse_constant=_reject_constant)
     except (json.JSONDecodeError, ValueError) as exc:
         raise ValueError(f"{path}: not a cdam model file (corrupt or truncated JSON: {exc})") from None
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise ValueError(f"{path}: format: not a cdam model file (format field missing or wrong)")
     try:
-        if doc.get("version") == 1:
+        version = doc.get("version")
+        if version == 1:                   # its own checksum is checked by the upgrade
             digest = str(doc.get("sha256", ""))
             doc = _upgrade_v1(doc)
-        else:
-            if doc.get("version") != VERSION:
-                raise ValueError(f"version: {doc.get('version')!r} is not supported (need "
-                                 f"{VERSION} or 1)")
-            validate_document(doc)
+        elif version != VERSION:
+            raise ValueError(f"version: {version!r} is not supported (need {VERSION} or 1)")
+        validate_document(doc)
+        if version == VERSION:
+            if "checksum" not in doc:
+                raise ValueError("checksum: missing")
             digest = hashlib.sha256(_canonical(doc)).hexdigest()
             if digest != doc["checksum"]["sha256"]:
                 raise ValueError("checksum.sha256: mismatch: the model file was altered or damaged")
-        validate_document(doc)
         cls = KINDS[doc["kind"]]
         section = doc["model"]
         try:

@@ -108,7 +108,6 @@ class HybridNarx(ArxModel):
                 m.net_ = BPNetwork.from_dict(d["network"])
             except ValueError as exc:
                 raise ValueError(str(exc).replace("model.", "model.network.", 1)) from None
-            nf = m.n_inputs_ if m.features == "raw" else 8
-            if m.net_.n_inputs_ != m.orders.nb * nf or m.net_.n_outputs_ != m.n_outputs_:
+            if m.net_.n_inputs_ != m.orders.nb * m.n_features or m.net_.n_outputs_ != m.n_outputs_:
                 raise ValueError("model.network: sizes do not match the ARX part")
         return m

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.signal import decimate
 
-from cdam_core.identify.pipelines import preprocess
+from cdam_core.preprocess import smooth_pair
 
 __all__ = ["DATA_DESIGN", "Segment", "PaperData", "simulate_records", "prepare_data"]
 
@@ -87,7 +87,7 @@ def decimation_factor(source_rate: float, rate: float) -> int:
 
 
 def _smooth_decimate(ds, smoothing: int, q: int):
-    U, Y = preprocess(ds.select(ds.inputs), ds.select(ds.outputs), smoothing)
+    U, Y = smooth_pair(ds.select(ds.inputs), ds.select(ds.outputs), smoothing)
     t = ds.t
     if q > 1:
         U = decimate(U, q, ftype="fir", axis=0, zero_phase=True)
@@ -99,7 +99,7 @@ def _smooth_decimate(ds, smoothing: int, q: int):
 def smoothed(ds, smoothing: int) -> tuple:
     """(raw U, raw Y, smoothed U, smoothed Y) of a Dataset at its own rate (for Figs. 8-10)."""
     U, Y = ds.select(ds.inputs), ds.select(ds.outputs)
-    Us, Ys = preprocess(U, Y, smoothing)
+    Us, Ys = smooth_pair(U, Y, smoothing)
     return U, Y, Us, Ys
 
 

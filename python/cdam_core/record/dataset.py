@@ -19,14 +19,14 @@ from __future__ import annotations
 import csv
 import io
 import json
-import math
 import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Sequence
 
 import numpy as np
+
+from cdam_core.base.jsonio import plain, write_text_atomic
 
 __all__ = [
     "Dataset",
@@ -286,46 +286,7 @@ def read_dataset(path: str | os.PathLike, inputs: Sequence[str] | str | None = N
 
 
 # -- writing --------------------------------------------------------------------------------
-def _umask_mode() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return 0o666 & ~mask
-
-
-_FILE_MODE = _umask_mode()
-
-
-def _atomic_write_text(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.chmod(tmp, _FILE_MODE)      # mkstemp makes 0600; give the usual umask mode
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
-
-
-def _jsonable(obj: Any) -> Any:
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _jsonable(obj.tolist())
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    if isinstance(obj, Path):
-        return str(obj)
-    return obj
+# atomic writes and JSON cleaning: cdam_core.base.jsonio (shared with reports and model files)
 
 
 def write_dataset(path: str | os.PathLike, dataset: Dataset, *, sidecar: bool = True) -> None:
@@ -358,6 +319,6 @@ def write_dataset(path: str | os.PathLike, dataset: Dataset, *, sidecar: bool = 
         meta["columns"] = ["t"] + dataset.columns
         meta["inputs"] = dataset.inputs
         meta["outputs"] = dataset.outputs
-        _atomic_write_text(sidecar_path(path),
-                           json.dumps(_jsonable(meta), indent=2, sort_keys=False) + "\n")
-    _atomic_write_text(path, buf.getvalue())
+        write_text_atomic(sidecar_path(path),
+                           json.dumps(plain(meta), indent=2, sort_keys=False) + "\n")
+    write_text_atomic(path, buf.getvalue())

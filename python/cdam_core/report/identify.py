@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from cdam_core.base.metrics import adaptation_value
-from cdam_core.identify.pipelines import preprocess
+from cdam_core.preprocess import smooth_pair
 
 __all__ = ["write_report"]
 
@@ -49,7 +49,7 @@ def _convergence_figure(result, path):
 
 def _prediction_figure(models, record, names, passes, t, path, title):
     import matplotlib.pyplot as plt
-    U, Y = preprocess(record[0], record[1], passes)
+    U, Y = smooth_pair(record[0], record[1], passes)
     m = Y.shape[1]
     fig, axes = plt.subplots(m, 1, figsize=(8, 1.8 * m + 0.6), sharex=True, squeeze=False)
     x = t if t is not None and len(t) == len(Y) else np.arange(len(Y))
