@@ -40,6 +40,7 @@ Status train_lm(const Mlp<Scalar>& net, Scalar* theta_io,
   using Vec = typename NormalEquations<Scalar>::Vec;
   const Index D = net.num_params();
   const double n_train = static_cast<double>(X.cols() * T.rows());
+  if (!opt.valid()) return Status::InvalidArgument;
   if (X.cols() < 1) return Status::Empty;
   if (X.rows() != net.inputs() || T.rows() != net.outputs() || T.cols() != X.cols())
     return Status::SizeMismatch;
@@ -107,7 +108,9 @@ Status train_lm(const Mlp<Scalar>& net, Scalar* theta_io,
 }
 
 // Plain batch gradient-descent BP on the MSE (the baseline): theta -= lr * dMSE/dtheta, with
-// dMSE/dtheta = -2 J'e / (N m). History: mse per epoch; stops on goal or epochs.
+// dMSE/dtheta = -2 J'e / (N m). History: mse per epoch; stops on goal or epochs. lr must be
+// positive and finite; an MSE that turns NaN or Inf (lr too large) ends the run with
+// Status::Diverged (the history up to it is kept).
 template <typename Scalar>
 Status train_gd(const Mlp<Scalar>& net, Scalar* theta_io,
                 const typename NormalEquations<Scalar>::ConstMap& X,
@@ -115,6 +118,9 @@ Status train_gd(const Mlp<Scalar>& net, Scalar* theta_io,
                 double goal, TrainHistory& hist, int threads = 1,
                 const EpochCallback& on_epoch = {}) {
   using Vec = typename NormalEquations<Scalar>::Vec;
+  if (!(lr > 0) || !std::isfinite(lr) || epochs < 0 || !(goal >= 0) || !std::isfinite(goal) ||
+      threads < 1)
+    return Status::InvalidArgument;
   if (X.cols() < 1) return Status::Empty;
   if (X.rows() != net.inputs() || T.rows() != net.outputs() || T.cols() != X.cols())
     return Status::SizeMismatch;
@@ -128,6 +134,7 @@ Status train_gd(const Mlp<Scalar>& net, Scalar* theta_io,
     const double mse = ne.evaluate(theta.data(), X, T, &jte, nullptr) / n_train;
     hist.mse.push_back(mse);
     hist.best_epoch = epoch;
+    if (!std::isfinite(mse)) return Status::Diverged;
     if (mse <= goal) { hist.stop = LmStop::Goal; break; }
     if (epoch == epochs) { hist.stop = LmStop::Epochs; break; }
     if (on_epoch && !on_epoch(epoch, mse)) { hist.stop = LmStop::Cancelled; break; }

@@ -30,10 +30,13 @@ struct LmOptions {
   int max_fail = 6;
   int threads = 1;
 
-  // The numeric ranges (the bindings check the same with messages naming each option).
+  // The numeric ranges (the bindings check the same with messages naming each option). mu_max
+  // below mu is allowed: training then stops at epoch 0 with "mu_max" (trainlm, the numpy twin).
   bool valid() const {
     return epochs >= 0 && goal >= 0 && mu > 0 && mu_dec > 0 && mu_dec < 1 && mu_inc > 1 &&
-           mu_max >= mu && min_grad >= 0 && std::isfinite(mu_max) && max_fail >= 1 && threads >= 1;
+           mu_max > 0 && min_grad >= 0 && std::isfinite(goal) && std::isfinite(mu) &&
+           std::isfinite(mu_inc) && std::isfinite(mu_max) && std::isfinite(min_grad) &&
+           max_fail >= 1 && threads >= 1;
   }
 };
 
