@@ -5,9 +5,9 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
-#include "cdam/levenberg_marquardt.hpp"
+#include "cdam/host/normal_equations.hpp"
+#include "cdam/host/training.hpp"
 #include "cdam/mlp.hpp"
-#include "cdam/normal_equations.hpp"
 #include <cmath>
 #include <string>
 

@@ -10,8 +10,8 @@
 #include <string>
 #include <vector>
 
+#include "cdam/host/bp_fitness.hpp"
 #include "cdam/optim/boa.hpp"
-#include "cdam/optim/bp_fitness.hpp"
 #include "cdam/optim/cabc.hpp"
 #include "cdam/optim/iboa.hpp"
 #include "common.hpp"
