@@ -5,10 +5,14 @@
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 
+#include <chrono>
+#include <climits>
 #include <cmath>
 #include <string>
 
 #include "cdam/activation.hpp"
+#include "cdam/mlp.hpp"
+#include "cdam/safe_size.hpp"
 #include "cdam/status.hpp"
 
 namespace cdam::bind {
@@ -81,9 +85,81 @@ inline Activation activation_from(const std::string& s) {
   value_error("activation: unknown '" + s + "'; use 'tansig' or 'logsig'");
 }
 
-inline void check_positive(long v, const char* name) {
+inline void check_positive(long long v, const char* name) {
   if (v < 1) value_error(std::string(name) + ": must be at least 1, got " + std::to_string(v));
 }
+
+// An integer argument that the core takes as int (lags, passes, epochs, threads, ...): Python
+// passes any 64-bit value; outside lo .. hi it is a ValueError naming the argument.
+inline int int_arg(long long v, const char* name, long long lo = 0, long long hi = INT_MAX) {
+  if (v < lo || v > hi)
+    value_error(std::string(name) + ": must be in " + std::to_string(lo) + " .. " +
+                std::to_string(hi) + ", got " + std::to_string(v));
+  return static_cast<int>(v);
+}
+
+// The value of a checked size expression (safe_size.hpp), or ValueError "<what>: too large".
+inline Index size_or_raise(const Checked<Index>& c, const std::string& what) {
+  if (!c.ok()) value_error(what + ": too large (the size overflows 64-bit arithmetic)");
+  return c.value();
+}
+
+// An array of `elements` values of T: elements * sizeof(T) must fit in Index, else ValueError.
+template <typename T>
+Index alloc_elements(const Checked<Index>& elements, const std::string& what) {
+  size_or_raise(elements * Index(sizeof(T)), what);
+  return elements.value();
+}
+
+// D = i h + h + h m + m of an i-h-m network, checked (each size >= 1, no overflow); the
+// ValueError names the largest of the three sizes.
+inline Index mlp_params_or_raise(long long i, long long h, long long m) {
+  check_positive(i, "inputs");
+  check_positive(h, "hidden");
+  check_positive(m, "outputs");
+  Index D = 0;
+  if (mlp_num_params(i, h, m, &D) != Status::Ok) {
+    const char* name = h >= i && h >= m ? "hidden" : (i >= m ? "inputs" : "outputs");
+    value_error(std::string(name) + ": network too large (parameter count i h + h + h m + m "
+                "overflows for i = " + std::to_string(i) + ", h = " + std::to_string(h) +
+                ", m = " + std::to_string(m) + ")");
+  }
+  return D;
+}
+
+// The poll hook (cdam/status.hpp) of a long native loop running without the GIL: every
+// `stride` calls, and at most every 20 ms, it re-acquires the GIL and runs Python's signal
+// handlers (PyErr_CheckSignals). When a handler raises (Ctrl-C: KeyboardInterrupt) it returns
+// false, the loop ends with Status::Cancelled, and raise_if_interrupted() (GIL held) re-raises
+// the handler's exception, which stays set on this thread meanwhile.
+class SignalPoll {
+ public:
+  explicit SignalPoll(long long stride = 1) : stride_(stride < 1 ? 1 : stride) {}
+  bool operator()() {
+    if (interrupted_) return false;
+    if (++calls_ < stride_) return true;
+    calls_ = 0;
+    const auto now = std::chrono::steady_clock::now();
+    if (now - last_ < std::chrono::milliseconds(20)) return true;
+    last_ = now;
+    py::gil_scoped_acquire gil;
+    if (PyErr_CheckSignals() != 0) interrupted_ = true;
+    return !interrupted_;
+  }
+  bool interrupted() const { return interrupted_; }
+  void raise_if_interrupted() const {
+    if (interrupted_) throw py::error_already_set();
+  }
+  // A copyable hook for the core's by-value Poll parameters.
+  auto hook() {
+    return [this] { return (*this)(); };
+  }
+
+ private:
+  long long stride_, calls_ = 0;
+  bool interrupted_ = false;
+  std::chrono::steady_clock::time_point last_ = std::chrono::steady_clock::now();
+};
 
 // Runs f.template operator()<T>() for the array's float dtype.
 template <typename F>

@@ -5,9 +5,12 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
-#include "cdam/levenberg_marquardt.hpp"
+#include "cdam/host/normal_equations.hpp"
+#include "cdam/host/training.hpp"
 #include "cdam/mlp.hpp"
-#include "cdam/normal_equations.hpp"
+#include <cmath>
+#include <string>
+
 #include "common.hpp"
 
 namespace py = pybind11;
@@ -25,14 +28,14 @@ struct NetArgs {
   Mlp<T> net;
   CArr<T> theta, X;
   typename NormalEquations<T>::ConstMap Xm;
-  NetArgs(const py::array& th, const py::array& x, long hidden, long outputs, const std::string& act)
+  NetArgs(const py::array& th, const py::array& x, long long hidden, long long outputs,
+          const std::string& act)
       : net(1, 1, 1),
         X(matrix<T>(x, "X")),
         Xm(X.data(), X.shape(1), X.shape(0)) {
-    check_positive(hidden, "hidden");
-    check_positive(outputs, "outputs");
+    const Index D = mlp_params_or_raise(X.shape(1), hidden, outputs);
     net = Mlp<T>(X.shape(1), hidden, outputs, activation_from(act));
-    theta = vector<T>(th, "theta", net.num_params());
+    theta = vector<T>(th, "theta", D);  // bounds h and m by theta's real length
   }
 };
 
@@ -41,11 +44,12 @@ typename NormalEquations<T>::ConstMap targets(const CArr<T>& t, const Mlp<T>& ne
   return typename NormalEquations<T>::ConstMap(t.data(), net.outputs(), t.shape(0));
 }
 
-py::array forward(const py::array& theta, const py::array& X, long hidden, long outputs,
-                  const std::string& act) {
+py::array forward(const py::array& theta, const py::array& X, long long hidden,
+                  long long outputs, const std::string& act) {
   return dispatch(X, "X", [&](auto tag) -> py::array {
     using T = decltype(tag);
     NetArgs<T> a(theta, X, hidden, outputs, act);
+    alloc_elements<T>(Checked<Index>(X.shape(0)) * outputs, "outputs");
     py::array_t<T> Y({X.shape(0), static_cast<py::ssize_t>(outputs)});
     Eigen::Map<typename NormalEquations<T>::Mat> Ym(Y.mutable_data(), outputs, X.shape(0));
     {
@@ -57,8 +61,8 @@ py::array forward(const py::array& theta, const py::array& X, long hidden, long 
   });
 }
 
-py::tuple mse_gradient(const py::array& theta, const py::array& X, const py::array& Tt, long hidden,
-                       const std::string& act) {
+py::tuple mse_gradient(const py::array& theta, const py::array& X, const py::array& Tt,
+                       long long hidden, const std::string& act) {
   return dispatch(X, "X", [&](auto tag) -> py::tuple {
     using T = decltype(tag);
     if (Tt.ndim() != 2) value_error("T: expected a 2-D array (samples x outputs)");
@@ -79,12 +83,13 @@ py::tuple mse_gradient(const py::array& theta, const py::array& X, const py::arr
   });
 }
 
-py::array jacobian(const py::array& theta, const py::array& X, long hidden, long outputs,
-                   const std::string& act) {
+py::array jacobian(const py::array& theta, const py::array& X, long long hidden,
+                   long long outputs, const std::string& act) {
   return dispatch(X, "X", [&](auto tag) -> py::array {
     using T = decltype(tag);
     NetArgs<T> a(theta, X, hidden, outputs, act);
     const Index n = X.shape(0), m = outputs, D = a.net.num_params();
+    alloc_elements<T>(Checked<Index>(n) * m * D, "X");  // the (N m) x D Jacobian
     py::array_t<T> J({n * m, D});
     T* out = J.mutable_data();
     {
@@ -101,13 +106,14 @@ py::array jacobian(const py::array& theta, const py::array& X, long hidden, long
   });
 }
 
-py::tuple jtj(const py::array& theta, const py::array& X, const py::array& Tt, long hidden,
-              const std::string& act, int threads) {
+py::tuple jtj(const py::array& theta, const py::array& X, const py::array& Tt, long long hidden,
+              const std::string& act, long long threads_) {
+  const int threads = int_arg(threads_, "threads", 1);
   return dispatch(X, "X", [&](auto tag) -> py::tuple {
     using T = decltype(tag);
     if (Tt.ndim() != 2) value_error("T: expected a 2-D array (samples x outputs)");
-    check_positive(threads, "threads");
     NetArgs<T> a(theta, X, hidden, Tt.shape(1), act);
+    alloc_elements<T>(Checked<Index>(a.net.num_params()) * a.net.num_params(), "hidden");
     auto t = matrix<T>(Tt, "T", -1, X.shape(0));
     typename NormalEquations<T>::Vec jte;
     typename NormalEquations<T>::Mat JtJ;
@@ -136,35 +142,40 @@ py::dict history_dict(const TrainHistory& h) {
   return d;
 }
 
-// Wraps an optional Python callable(epoch, mse) -> bool|None, called with the GIL held.
-EpochCallback make_callback(const py::object& cb) {
-  if (cb.is_none()) return {};
-  return [cb](int epoch, double mse) {
+// The epoch hook of the trainers: Python's signal handlers (Ctrl-C, through `poll`), then the
+// optional Python callable(epoch, mse) -> bool|None, called with the GIL held.
+EpochCallback make_callback(const py::object& cb, SignalPoll& poll) {
+  return [&cb, &poll](int epoch, double mse) {
+    if (!poll()) return false;
+    if (cb.is_none()) return true;
     py::gil_scoped_acquire gil;
     py::object r = cb(epoch, mse);
     return r.is_none() || r.cast<bool>();
   };
 }
 
+// The ranges of LmOptions::valid(), each with a message naming the option.
 void check_options(const LmOptions& o) {
-  if (o.epochs < 0) value_error("epochs: must be >= 0");
-  if (!(o.mu > 0)) value_error("mu: must be > 0");
+  if (!(o.mu > 0) || !std::isfinite(o.mu)) value_error("mu: must be > 0 and finite");
   if (!(o.mu_dec > 0 && o.mu_dec < 1)) value_error("mu_dec: must be in (0, 1)");
-  if (!(o.mu_inc > 1)) value_error("mu_inc: must be > 1");
-  if (!(o.mu_max > 0)) value_error("mu_max: must be > 0");
-  if (!(o.goal >= 0)) value_error("goal: must be >= 0");
-  if (!(o.min_grad >= 0)) value_error("min_grad: must be >= 0");
-  if (o.max_fail < 1) value_error("max_fail: must be >= 1");
-  if (o.threads < 1) value_error("threads: must be >= 1");
+  if (!(o.mu_inc > 1) || !std::isfinite(o.mu_inc)) value_error("mu_inc: must be > 1 and finite");
+  if (!(o.mu_max > 0) || !std::isfinite(o.mu_max)) value_error("mu_max: must be > 0 and finite");
+  if (!(o.goal >= 0) || !std::isfinite(o.goal)) value_error("goal: must be >= 0 and finite");
+  if (!(o.min_grad >= 0) || !std::isfinite(o.min_grad))
+    value_error("min_grad: must be >= 0 and finite");
 }
 
-py::tuple lm(const py::array& theta0, const py::array& X, const py::array& Tt, long hidden,
-             const std::string& act, int epochs, double goal, double mu, double mu_dec,
-             double mu_inc, double mu_max, double min_grad, int max_fail, const py::object& Xv,
-             const py::object& Tv, int threads, const py::object& callback) {
+py::tuple lm(const py::array& theta0, const py::array& X, const py::array& Tt, long long hidden,
+             const std::string& act, long long epochs, double goal, double mu, double mu_dec,
+             double mu_inc, double mu_max, double min_grad, long long max_fail,
+             const py::object& Xv, const py::object& Tv, long long threads,
+             const py::object& callback) {
   LmOptions o;
-  o.epochs = epochs; o.goal = goal; o.mu = mu; o.mu_dec = mu_dec; o.mu_inc = mu_inc;
-  o.mu_max = mu_max; o.min_grad = min_grad; o.max_fail = max_fail; o.threads = threads;
+  o.epochs = int_arg(epochs, "epochs");
+  o.max_fail = int_arg(max_fail, "max_fail", 1);
+  o.threads = int_arg(threads, "threads", 1);
+  o.goal = goal; o.mu = mu; o.mu_dec = mu_dec; o.mu_inc = mu_inc;
+  o.mu_max = mu_max; o.min_grad = min_grad;
   check_options(o);
   return dispatch(X, "X", [&](auto tag) -> py::tuple {
     using T = decltype(tag);
@@ -182,27 +193,32 @@ py::tuple lm(const py::array& theta0, const py::array& X, const py::array& Tt, l
     py::array_t<T> theta(a.net.num_params());
     std::copy(a.theta.data(), a.theta.data() + a.net.num_params(), theta.mutable_data());
     TrainHistory h;
-    auto cb = make_callback(callback);
+    SignalPoll poll;
+    auto cb = make_callback(callback, poll);
+    Status st;
     {
       py::gil_scoped_release nogil;
       Map tm = targets(t, a.net);
       if (val) {
         Map xvm(xv.data(), a.net.inputs(), xv.shape(0)), tvm(tv.data(), a.net.outputs(), tv.shape(0));
-        train_lm(a.net, theta.mutable_data(), a.Xm, tm, &xvm, &tvm, o, h, cb);
+        st = train_lm(a.net, theta.mutable_data(), a.Xm, tm, &xvm, &tvm, o, h, cb);
       } else {
-        train_lm<T>(a.net, theta.mutable_data(), a.Xm, tm, nullptr, nullptr, o, h, cb);
+        st = train_lm<T>(a.net, theta.mutable_data(), a.Xm, tm, nullptr, nullptr, o, h, cb);
       }
     }
+    poll.raise_if_interrupted();
+    check_status(st, "train_lm");
     return py::make_tuple(theta, history_dict(h));
   });
 }
 
-py::tuple gd(const py::array& theta0, const py::array& X, const py::array& Tt, long hidden,
-             const std::string& act, double lr, int epochs, double goal, int threads,
+py::tuple gd(const py::array& theta0, const py::array& X, const py::array& Tt, long long hidden,
+             const std::string& act, double lr, long long epochs_, double goal, long long threads_,
              const py::object& callback) {
-  if (!(lr > 0)) value_error("lr: must be > 0");
-  if (epochs < 0) value_error("epochs: must be >= 0");
-  check_positive(threads, "threads");
+  if (!(lr > 0) || !std::isfinite(lr)) value_error("lr: must be > 0 and finite");
+  const int epochs = int_arg(epochs_, "epochs");
+  const int threads = int_arg(threads_, "threads", 1);
+  if (!(goal >= 0) || !std::isfinite(goal)) value_error("goal: must be >= 0 and finite");
   return dispatch(X, "X", [&](auto tag) -> py::tuple {
     using T = decltype(tag);
     if (Tt.ndim() != 2) value_error("T: expected a 2-D array (samples x outputs)");
@@ -211,11 +227,19 @@ py::tuple gd(const py::array& theta0, const py::array& X, const py::array& Tt, l
     py::array_t<T> theta(a.net.num_params());
     std::copy(a.theta.data(), a.theta.data() + a.net.num_params(), theta.mutable_data());
     TrainHistory h;
-    auto cb = make_callback(callback);
+    SignalPoll poll;
+    auto cb = make_callback(callback, poll);
+    Status st;
     {
       py::gil_scoped_release nogil;
-      train_gd(a.net, theta.mutable_data(), a.Xm, targets(t, a.net), lr, epochs, goal, h, threads, cb);
+      st = train_gd(a.net, theta.mutable_data(), a.Xm, targets(t, a.net), lr, epochs, goal, h,
+                    threads, cb);
     }
+    poll.raise_if_interrupted();
+    if (st == Status::Diverged)
+      value_error("lr: training diverged (the MSE became NaN or Inf at epoch " +
+                  std::to_string(h.mse.size() - 1) + "); use a smaller lr");
+    check_status(st, "train_gd");
     return py::make_tuple(theta, history_dict(h));
   });
 }
@@ -223,9 +247,8 @@ py::tuple gd(const py::array& theta0, const py::array& X, const py::array& Tt, l
 }  // namespace
 
 void register_network(py::module_& m) {
-  m.def("mlp_num_params", [](long i, long h, long o) {
-    check_positive(i, "inputs"); check_positive(h, "hidden"); check_positive(o, "outputs");
-    return i * h + h + h * o + o;
+  m.def("mlp_num_params", [](long long i, long long h, long long o) {
+    return mlp_params_or_raise(i, h, o);
   }, py::arg("inputs"), py::arg("hidden"), py::arg("outputs"));
   m.def("mlp_forward", &forward, py::arg("theta"), py::arg("X"), py::arg("hidden"),
         py::arg("outputs"), py::arg("activation") = "tansig",

@@ -3,14 +3,15 @@
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 
+#include <climits>
 #include <cmath>
 #include <memory>
 #include <set>
 #include <string>
 #include <vector>
 
+#include "cdam/host/bp_fitness.hpp"
 #include "cdam/optim/boa.hpp"
-#include "cdam/optim/bp_fitness.hpp"
 #include "cdam/optim/cabc.hpp"
 #include "cdam/optim/iboa.hpp"
 #include "common.hpp"
@@ -39,9 +40,15 @@ struct OptionReader {
     used.insert(key);
     if (!d.contains(key)) return v;
     py::object o = d[key];
+    const std::string name = std::string("options['") + key + "']";
     if (py::isinstance<py::bool_>(o) || !py::isinstance<py::int_>(o))
-      value_error(std::string("options['") + key + "']: must be an integer");
-    return py::cast<int>(o);
+      value_error(name + ": must be an integer");
+    int overflow = 0;
+    const long long x = PyLong_AsLongLongAndOverflow(o.ptr(), &overflow);
+    if (overflow != 0 || x < INT_MIN || x > INT_MAX)
+      value_error(name + ": must be in " + std::to_string(INT_MIN) + " .. " +
+                  std::to_string(INT_MAX));
+    return static_cast<int>(x);
   }
   std::string str(const char* key, const std::string& v) {
     used.insert(key);
@@ -79,6 +86,13 @@ struct Result {
   std::vector<double> curve;
   Swarm<double> swarm;
   Result(Index dim, Index n, int iters) : curve(static_cast<size_t>(iters) + 1), swarm(dim, n) {}
+
+  // The sizes of a run, checked before anything is allocated: the Swarm's five D x n position
+  // blocks and the curve (iterations + 1 values).
+  static void check_sizes(Index dim, Index n, int iters) {
+    alloc_elements<double>(Checked<Index>(dim) * n * 5, "dim, options['n']");
+    alloc_elements<double>(Checked<Index>(iters) + 1, "options['iterations']");
+  }
 };
 
 template <typename Fitness>
@@ -90,6 +104,7 @@ py::dict run(const std::string& algo, py::dict options, Fitness& fitness, Index 
   Status st = Status::Ok;
   std::unique_ptr<Result> res;
   Rng rng(seed);
+  SignalPoll poll;
   if (algo == "boa" || algo == "iboa") {
     IboaOptions io;
     io.boa = boa_options(r);
@@ -110,14 +125,15 @@ py::dict run(const std::string& algo, py::dict options, Fitness& fitness, Index 
       value_error("options: invalid " + algo + " settings (need n >= 2, 0 <= p <= 1, c > 0, "
                   "lb < ub; IBOA: 1 <= clusters <= n, 0 <= chaos_candidates <= n, "
                   "kmeans_iters >= 1, chaos_scale > 0)");
+    Result::check_sizes(dim, n, io.boa.iterations);
     res = std::make_unique<Result>(dim, n, io.boa.iterations);
     py::gil_scoped_release nogil;
     if (algo == "boa") {
       Boa<double> boa(io.boa);
-      st = boa.run(res->swarm, fitness, rng, res->curve.data());
+      st = boa.run(res->swarm, fitness, rng, res->curve.data(), poll.hook());
     } else {
       Iboa<double> iboa(io);
-      st = iboa.run(res->swarm, fitness, rng, res->curve.data());
+      st = iboa.run(res->swarm, fitness, rng, res->curve.data(), poll.hook());
     }
   } else if (algo == "cabc") {
     CabcOptions co;
@@ -131,13 +147,16 @@ py::dict run(const std::string& algo, py::dict options, Fitness& fitness, Index 
     if (co.check(n) != Status::Ok)
       value_error("options: invalid cabc settings (need n >= 4, iterations >= 0, limit >= 0, "
                   "lb < ub, 1 <= scout_candidates <= n, scout_radius > 0)");
+    Result::check_sizes(dim, n, co.iterations);
     res = std::make_unique<Result>(dim, n, co.iterations);
     py::gil_scoped_release nogil;
     Cabc<double> cabc(co);
-    st = cabc.run(res->swarm, fitness, rng, res->curve.data());
+    st = cabc.run(res->swarm, fitness, rng, res->curve.data(), poll.hook());
   } else {
     value_error("algorithm: unknown '" + algo + "'; use 'boa', 'iboa' or 'cabc'");
   }
+  poll.raise_if_interrupted();
+  if (st == Status::Overflow) value_error("dim: too large for the optimiser (more than 2**32 - 1)");
   check_status(st, "options");
   const Swarm<double>& s = res->swarm;
   const Index live = algo == "cabc" ? n / 2 : n;
@@ -163,16 +182,16 @@ std::uint32_t seed_of(long long seed) {
 }
 
 py::dict optimise(const std::string& algo, const std::string& objective, const py::object& X,
-                  const py::object& Tt, long hidden, const std::string& act, long dim,
-                  long long seed, const py::object& options, int threads) {
+                  const py::object& Tt, long long hidden, const std::string& act, long long dim,
+                  long long seed, const py::object& options, long long threads_) {
   const std::uint32_t sd = seed_of(seed);
-  check_positive(threads, "threads");
+  const int threads = int_arg(threads_, "threads", 1);
   py::dict opts = options.is_none() ? py::dict() : py::dict(options);
   if (objective == "bp") {
     if (X.is_none() || Tt.is_none()) value_error("X, T: the 'bp' objective needs both");
-    check_positive(hidden, "hidden");
     auto x = matrix<double>(py::array::ensure(X), "X");
     auto t = matrix<double>(py::array::ensure(Tt), "T", -1, x.shape(0));
+    mlp_params_or_raise(x.shape(1), hidden, t.shape(1));
     Mlp<double> net(x.shape(1), hidden, t.shape(1), activation_from(act));
     Map Xm(x.data(), x.shape(1), x.shape(0)), Tm(t.data(), t.shape(1), t.shape(0));
     BpFitness<double> fit(net, Xm, Tm, threads);
@@ -198,14 +217,14 @@ py::dict optimise(const std::string& algo, const std::string& objective, const p
   value_error("objective: unknown '" + objective + "'; use 'bp', 'sphere' or 'rastrigin'");
 }
 
-py::array bp_fitness(const py::array& thetas, const py::array& X, const py::array& Tt, long hidden,
-                     const std::string& act, int threads) {
+py::array bp_fitness(const py::array& thetas, const py::array& X, const py::array& Tt,
+                     long long hidden, const std::string& act, long long threads_) {
   check_positive(hidden, "hidden");
-  check_positive(threads, "threads");
+  const int threads = int_arg(threads_, "threads", 1);
   auto x = matrix<double>(X, "X");
   auto t = matrix<double>(Tt, "T", -1, x.shape(0));
+  const Index D = mlp_params_or_raise(x.shape(1), hidden, t.shape(1));
   Mlp<double> net(x.shape(1), hidden, t.shape(1), activation_from(act));
-  const Index D = net.num_params();
   const bool one = thetas.ndim() == 1;
   auto th = one ? vector<double>(thetas, "thetas", D) : matrix<double>(thetas, "thetas", D);
   const Index n = one ? 1 : th.shape(0);

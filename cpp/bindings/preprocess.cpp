@@ -4,6 +4,9 @@
 
 #include "cdam/scaling.hpp"
 #include "cdam/smoothing.hpp"
+#include <algorithm>
+#include <vector>
+
 #include "common.hpp"
 
 namespace py = pybind11;
@@ -12,8 +15,8 @@ using namespace cdam::bind;
 
 namespace {
 
-py::array smooth(const py::array& y, int passes) {
-  if (passes < 0) value_error("passes: must be >= 0, got " + std::to_string(passes));
+py::array smooth(const py::array& y, long long passes_) {
+  const int passes = int_arg(passes_, "passes");
   if (y.ndim() != 1 && y.ndim() != 2) value_error("y: expected a 1-D or 2-D array");
   return dispatch(y, "y", [&](auto tag) -> py::array {
     using T = decltype(tag);
@@ -26,10 +29,12 @@ py::array smooth(const py::array& y, int passes) {
     std::copy(in.data(), in.data() + in.size(), out.mutable_data());
     Status s;
     std::vector<T> work(3 * c);
+    SignalPoll poll(std::max<py::ssize_t>(1, (1 << 16) / (n * c)));  // about 64k values a poll
     {
       py::gil_scoped_release nogil;
-      s = five_point_cubic_smooth_rows(out.mutable_data(), n, c, passes, work.data());
+      s = five_point_cubic_smooth_rows(out.mutable_data(), n, c, passes, work.data(), poll.hook());
     }
+    poll.raise_if_interrupted();
     check_status(s, "y");
     return out;
   });

@@ -32,9 +32,17 @@ ControlParams control_from(const py::array& a) {
   return c;
 }
 
-void check_step(double dt, int substeps) {
+int check_step(double dt, long long substeps) {
   if (!(dt > 0) || !std::isfinite(dt)) value_error("dt: must be positive and finite");
-  if (substeps < 1 || substeps > 1000) value_error("substeps: must be in 1 .. 1000");
+  return cdam::bind::int_arg(substeps, "substeps", 1, 1000);
+}
+
+// A run that ended with non-finite states: the step dt / substeps was too long for the plant.
+void check_run(cdam::Status s, const char* what) {
+  if (s == cdam::Status::Diverged)
+    value_error(std::string("dt: the simulation diverged (NaN or Inf state); use a smaller dt or "
+                            "more substeps (sim_substeps gives the stable count)"));
+  check_status(s, what);
 }
 
 }  // namespace
@@ -63,36 +71,37 @@ void register_sim(py::module_& m) {
   m.def("sim_fastest_rate", [](const py::array& plant) { return fastest_rate(plant_from(plant)); },
         py::arg("plant"), "Fastest motor-side mode bound (rad/s) used for the RK4 sub-step rule.");
   m.def("sim_substeps", [](const py::array& plant, double dt) {
-        if (!(dt > 0)) value_error("dt: must be positive");
+        if (!(dt > 0) || !std::isfinite(dt)) value_error("dt: must be positive and finite");
         return substeps_for(plant_from(plant), dt);
       }, py::arg("plant"), py::arg("dt"),
       "RK4 sub-steps per dt so that h * fastest_rate <= 2.5.");
 
   m.def("sim_open_loop", [](const py::array& plant, const py::array& x0, const py::array& U,
-                            double dt, int substeps) {
+                            double dt, long long substeps_) {
         const PlantParams p = plant_from(plant);
         auto xv = cdam::bind::vector<double>(x0, "x0", kNx);
         auto Uv = cdam::bind::matrix<double>(U, "U", kNu);
-        check_step(dt, substeps);
+        const int substeps = check_step(dt, substeps_);
         const long n = static_cast<long>(Uv.shape(0));
+        cdam::bind::alloc_elements<double>((cdam::Checked<cdam::Index>(n) + 1) * kNx, "U");
         py::array_t<double> X({n + 1, static_cast<long>(kNx)});
         cdam::Status s;
         {
           py::gil_scoped_release nogil;
           s = simulate_open_loop(p, xv.data(), Uv.data(), n, dt, substeps, X.mutable_data());
         }
-        check_status(s, "sim_open_loop");
+        check_run(s, "sim_open_loop");
         return X;
       }, py::arg("plant"), py::arg("x0"), py::arg("U"), py::arg("dt"), py::arg("substeps"),
       "States (N+1, 21) under inputs U (N, 6) held for dt each.");
 
   m.def("sim_closed_loop", [](const py::array& plant, const py::array& control, const py::array& x0,
-                              const py::array& SP, double dt, int substeps) {
+                              const py::array& SP, double dt, long long substeps_) {
         const PlantParams p = plant_from(plant);
         const ControlParams c = control_from(control);
         auto xv = cdam::bind::vector<double>(x0, "x0", kNx);
         auto SPv = cdam::bind::matrix<double>(SP, "setpoints", kNsp);
-        check_step(dt, substeps);
+        const int substeps = check_step(dt, substeps_);
         const long n = static_cast<long>(SPv.shape(0));
         py::array_t<double> X({n, static_cast<long>(kNx)});
         py::array_t<double> LOG({n, static_cast<long>(kNlog)});
@@ -102,7 +111,7 @@ void register_sim(py::module_& m) {
           s = simulate_closed_loop(p, c, xv.data(), SPv.data(), n, dt, substeps, X.mutable_data(),
                                    LOG.mutable_data());
         }
-        check_status(s, "sim_closed_loop");
+        check_run(s, "sim_closed_loop");
         return py::make_tuple(X, LOG);
       }, py::arg("plant"), py::arg("control"), py::arg("x0"), py::arg("setpoints"), py::arg("dt"),
       py::arg("substeps"),

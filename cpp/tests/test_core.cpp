@@ -6,10 +6,10 @@
 #include <array>
 #include <cmath>
 
-#include "cdam/levenberg_marquardt.hpp"
+#include "cdam/host/normal_equations.hpp"
+#include "cdam/host/training.hpp"
 #include "cdam/mlp.hpp"
 #include "cdam/narx.hpp"
-#include "cdam/normal_equations.hpp"
 #include "cdam/rng.hpp"
 #include "cdam/scaling.hpp"
 #include "cdam/smoothing.hpp"

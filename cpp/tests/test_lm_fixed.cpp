@@ -1,13 +1,14 @@
-// The fixed-size, heap-free Levenberg-Marquardt (cdam/lm_fixed.hpp) against the host's
-// train_lm (levenberg_marquardt.hpp: NormalEquations' structured J'J, Eigen's LLT) on the same
-// 4-8-2 problem, and its Cholesky against Eigen's LLT.
+// The one Levenberg-Marquardt loop (cdam/levenberg_marquardt.hpp) with its two policies: the
+// fixed-size, heap-free LmFixed (cdam/lm_fixed.hpp) against the host's train_lm (LmDynamic in
+// cdam/host/training.hpp: NormalEquations' structured J'J, Eigen's LLT) on the same 4-8-2
+// problem, and LmFixed's Cholesky against Eigen's LLT.
 #include <doctest/doctest.h>
 
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
 #include <cmath>
 
-#include "cdam/levenberg_marquardt.hpp"
+#include "cdam/host/training.hpp"
 #include "cdam/lm_fixed.hpp"
 #include "cdam/rng.hpp"
 

@@ -9,8 +9,8 @@
 #include <cmath>
 #include <vector>
 
+#include "cdam/host/bp_fitness.hpp"
 #include "cdam/optim/boa.hpp"
-#include "cdam/optim/bp_fitness.hpp"
 #include "cdam/optim/cabc.hpp"
 #include "cdam/optim/chaos.hpp"
 #include "cdam/optim/iboa.hpp"
@@ -18,6 +18,8 @@
 
 using namespace cdam;
 using namespace cdam::optim;
+using cdam::host::activate_inplace;
+using cdam::host::syrk_lower;
 
 namespace {
 double sphere(const double* x, Index n) {

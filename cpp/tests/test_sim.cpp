@@ -111,7 +111,7 @@ TEST_CASE("sim: the sub-step rule keeps h * fastest rate <= 2.5") {
   CHECK(1e-3 / (n - 1) * fastest_rate(p) > 2.5);
 }
 
-TEST_CASE("sim: a stiff cable with sub-steps stays bounded, without them RK4 blows up") {
+TEST_CASE("sim: a stiff cable with sub-steps stays bounded, without them RK4 diverges (reported)") {
   PlantParams p = default_plant();
   p.Ks[0] = 4e4;      // sqrt(4e4/1e-3) = 6325 rad/s: h omega = 6.3 at 1 ms
   p.Kd[0] = 0.0;
@@ -126,8 +126,9 @@ TEST_CASE("sim: a stiff cable with sub-steps stays bounded, without them RK4 blo
   REQUIRE(simulate_open_loop(p, x.data(), U.data(), n, 1e-3, substeps_for(p, 1e-3), X.data()) ==
           cdam::Status::Ok);
   CHECK(std::abs(X[n * kNx + 9]) < 0.02);
-  REQUIRE(simulate_open_loop(p, x.data(), U.data(), n, 1e-3, 1, X.data()) == cdam::Status::Ok);
-  CHECK(!(std::abs(X[n * kNx + 9]) < 1.0));  // diverged (or NaN)
+  // without them the state overflows to Inf / NaN within the 200 steps: reported, not returned
+  CHECK(simulate_open_loop(p, x.data(), U.data(), n, 1e-3, 1, X.data()) ==
+        cdam::Status::Diverged);
 }
 
 TEST_CASE("sim: the closed loop holds hover and its loop does not allocate") {

@@ -5,12 +5,14 @@
 #define DOCTEST_CONFIG_IMPLEMENT_WITH_MAIN
 #include <doctest/doctest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <string>
 #include <vector>
 
-#include "cdam/optim/bp_fitness.hpp"
+#include "cdam/optim/mlp_fitness.hpp"
 #include "cdam/slcan.hpp"
 #include "fw/controller.hpp"
 #include "fw/model_runner.hpp"
@@ -126,23 +128,202 @@ TEST_CASE("controller through SLCAN text: the loop image's path") {
   CHECK(out == "t20080000000000000000\r");  // zero reference, zero state: zero current
 }
 
-TEST_CASE("optim run: MseFitness equals the core's MlpFitness on the flash data") {
-  // fw/optim_run.hpp keeps its own fitness because bp_fitness.hpp does not compile for the
-  // target (std::mutex); on the host both exist and must agree exactly (same loop, same order).
+TEST_CASE("optim run: the core's MlpFitness on the flash data equals a plain double MSE") {
+  // fw/optim_run.hpp uses cdam/optim/mlp_fitness.hpp (embeddable; the threaded BpFitness is
+  // fenced in cdam/host/). Reference: MSE in double with std::tanh over the same float data
+  // (the fitness uses the fast float tanh, within 1e-6 of tanh).
   using Net = fw::optim_run::Net;
   const Net net;
-  fw::optim_run::MseFitness<Net> mine(net, cdam_optim_data::kX, cdam_optim_data::kT,
-                                      cdam_optim_data::kSamples);
-  cdam::optim::MlpFitness<Net> core(net, cdam_optim_data::kX, cdam_optim_data::kT,
-                                    cdam_optim_data::kSamples);
+  cdam::optim::MlpFitness<Net> fit(net, cdam_optim_data::kX, cdam_optim_data::kT,
+                                   cdam_optim_data::kSamples);
   cdam::Rng rng(3);
   float theta[3 * Net::kParams];
   for (float& v : theta) v = rng.uniform(-1.0f, 1.0f);
-  float a[3], b[3];
-  mine.batch(theta, 3, a);
-  core.batch(theta, 3, b);
+  float got[3];
+  Eigen::internal::set_is_malloc_allowed(false);
+  fit.batch(theta, 3, got);
+  Eigen::internal::set_is_malloc_allowed(true);
+  constexpr int I = Net::kInputs, H = Net::kHidden, M = Net::kOutputs;
   for (int k = 0; k < 3; ++k) {
-    CHECK(a[k] == b[k]);
-    CHECK(a[k] > 0.0f);
+    const float* th = theta + k * Net::kParams;
+    double sse = 0;
+    for (int s = 0; s < cdam_optim_data::kSamples; ++s) {
+      double a[H];
+      for (int j = 0; j < H; ++j) {
+        double v = th[I * H + j];
+        for (int l = 0; l < I; ++l) v += double(th[l * H + j]) * cdam_optim_data::kX[s * I + l];
+        a[j] = std::tanh(v);
+      }
+      for (int o = 0; o < M; ++o) {
+        double y = th[I * H + H + H * M + o];
+        for (int j = 0; j < H; ++j) y += double(th[I * H + H + j * M + o]) * a[j];
+        const double e = cdam_optim_data::kT[s * M + o] - y;
+        sse += e * e;
+      }
+    }
+    const double want = sse / (cdam_optim_data::kSamples * M);
+    CHECK(got[k] == doctest::Approx(want).epsilon(1e-5));
+    CHECK(got[k] > 0.0f);
   }
+}
+
+namespace {
+
+cdam::CanFrame reference_frame(float r1, float r2) {
+  cdam::CanFrame f;
+  f.id = 0x300;
+  f.dlc = 8;
+  const float r[2] = {r1, r2};
+  std::memcpy(f.data, r, 8);
+  return f;
+}
+
+// One cycle at rest (q = w = 0 on both motors); returns the two command currents (counts).
+void rest_cycle(fw::Controller& ctl, std::int16_t* c) {
+  cdam::CanFrame cmd, diag;
+  cdam::c610::Feedback fb;
+  fb.motor = 1;
+  REQUIRE(!ctl.on_frame(cdam::c610::encode_feedback(fb), &cmd, &diag));
+  fb.motor = 2;
+  REQUIRE(ctl.on_frame(cdam::c610::encode_feedback(fb), &cmd, &diag));
+  std::int16_t all[4];
+  REQUIRE(cdam::c610::decode_command(cmd, all) == cdam::c610::Decode::Ok);
+  c[0] = all[0];
+  c[1] = all[1];
+}
+
+std::uint16_t status_word(const cdam::CanFrame& st, int k) {
+  std::uint16_t v;
+  std::memcpy(&v, st.data + 2 * k, 2);
+  return v;
+}
+
+}  // namespace
+
+TEST_CASE("current conversion: NaN is 0 A, Inf and huge values saturate at the C610's 10 A") {
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const float inf = std::numeric_limits<float>::infinity();
+  CHECK(fw::amps_to_counts(nan) == 0);
+  CHECK(fw::amps_to_counts(inf) == 10000);
+  CHECK(fw::amps_to_counts(-inf) == -10000);
+  CHECK(fw::amps_to_counts(1e30f) == 10000);
+  CHECK(fw::amps_to_counts(-1e30f) == -10000);
+  CHECK(fw::amps_to_counts(10.2f) == 10000);
+  CHECK(fw::amps_to_counts(1.2344f) == 1234);  // 1 mA per count, nearest
+  CHECK(fw::amps_to_counts(-1.2346f) == -1235);
+}
+
+TEST_CASE("controller: a NaN reference is rejected, counted and cannot latch the integrator") {
+  fw::Controller ctl;
+  cdam::CanFrame cmd, diag, st;
+  CHECK(!ctl.on_frame(reference_frame(0.5f, -0.3f), &cmd, &diag));
+  CHECK(!ctl.take_status(&st));  // nothing rejected yet, nothing requested
+  std::int16_t c[2];
+  rest_cycle(ctl, c);
+  // e = r, integral = r dt: u = kp r + ki r dt (A), 1000 counts per A
+  CHECK(c[0] == std::lround((8.0 * 0.5 + 2.0 * 0.5 * 0.001) * 1000));
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  CHECK(!ctl.on_frame(reference_frame(nan, 0.1f), &cmd, &diag));
+  CHECK(ctl.input_counts().ref_nonfinite == 1);
+  CHECK(ctl.rejected() == 1);
+  CHECK(ctl.references()[0] == 0.5f);   // the last valid pair is held, both values
+  CHECK(ctl.references()[1] == -0.3f);
+  REQUIRE(ctl.take_status(&st));
+  CHECK(st.id == 0x3F1);
+  CHECK(st.dlc == 8);
+  CHECK(status_word(st, 0) == 1);
+  CHECK(status_word(st, 1) == 0);
+  CHECK(!ctl.take_status(&st));  // sent once per change
+  rest_cycle(ctl, c);
+  // second cycle on the held reference: integral = 2 r dt
+  CHECK(c[0] == std::lround((8.0 * 0.5 + 2.0 * 2 * 0.5 * 0.001) * 1000));
+  CHECK(std::isfinite(ctl.integral(0)));
+  CHECK(std::isfinite(ctl.integral(1)));
+  // a valid reference afterwards works normally: nothing was latched
+  CHECK(!ctl.on_frame(reference_frame(0.0f, 0.0f), &cmd, &diag));
+  rest_cycle(ctl, c);
+  const double i1 = 2 * 0.5 * 0.001;  // integral of the first two cycles, e = 0 now
+  CHECK(c[0] == std::lround(2.0 * i1 * 1000));
+}
+
+TEST_CASE("controller: Inf and out-of-range references are rejected, the range edge accepted") {
+  fw::Controller ctl;
+  cdam::CanFrame cmd, diag, st;
+  const float inf = std::numeric_limits<float>::infinity();
+  CHECK(!ctl.on_frame(reference_frame(inf, 0.0f), &cmd, &diag));
+  CHECK(!ctl.on_frame(reference_frame(0.0f, -inf), &cmd, &diag));
+  CHECK(!ctl.on_frame(reference_frame(1e30f, 0.0f), &cmd, &diag));
+  CHECK(!ctl.on_frame(reference_frame(0.0f, std::nextafter(256.0f, 1e9f)), &cmd, &diag));
+  CHECK(ctl.input_counts().ref_nonfinite == 2);
+  CHECK(ctl.input_counts().ref_range == 2);
+  CHECK(ctl.references()[0] == 0.0f);
+  CHECK(ctl.references()[1] == 0.0f);
+  CHECK(!ctl.on_frame(reference_frame(-256.0f, 256.0f), &cmd, &diag));  // the edge itself
+  CHECK(ctl.references()[0] == -256.0f);
+  CHECK(ctl.input_counts().ref_range == 2);
+  std::int16_t c[2];
+  rest_cycle(ctl, c);
+  CHECK(c[0] == -10000);  // saturated at the C610's range, not wrapped
+  CHECK(c[1] == 10000);
+  REQUIRE(ctl.take_status(&st));
+  CHECK(status_word(st, 0) == 2);
+  CHECK(status_word(st, 1) == 2);
+}
+
+TEST_CASE("controller: out-of-range measurements are counted and the last valid state held") {
+  fw::Controller ctl;
+  cdam::CanFrame cmd, diag, st;
+  cdam::c610::Feedback fb;
+  fb.motor = 1;
+  cdam::CanFrame bad = cdam::c610::encode_feedback(fb);
+  bad.data[0] = 0x20;  // angle 0x2000 = 8192: one past the encoder's 0..8191
+  CHECK(!ctl.on_frame(bad, &cmd, &diag));
+  CHECK(ctl.input_counts().meas_range == 1);
+  // motor 1 spinning at 20,000 rpm (the C610's range), 2731 counts a millisecond: the output
+  // angle grows by 2 pi 2731 / (8192 36) = 0.0582 rad a frame and would pass kJointRangeRad
+  // after 256 / 0.0582 = 4399.8 frames; from there on the measured angle is held within range
+  cdam::c610::Feedback rest;
+  rest.motor = 2;
+  fb.speed_rpm = 20000;
+  long angle = 0;
+  int first_reject = -1;
+  float q_max = 0.0f;
+  for (int k = 0; k < 5000; ++k) {
+    fb.angle = static_cast<std::uint16_t>(angle % 8192);
+    const std::uint16_t before = ctl.input_counts().meas_range;
+    ctl.on_frame(cdam::c610::encode_feedback(fb), &cmd, &diag);
+    if (ctl.input_counts().meas_range != before && first_reject < 0) first_reject = k;
+    if (ctl.on_frame(cdam::c610::encode_feedback(rest), &cmd, &diag))
+      q_max = std::max(q_max, ctl.features()[0]);
+    angle += 2731;
+  }
+  const double per_frame = 2 * M_PI * 2731.0 / (8192.0 * 36.0);
+  CHECK(first_reject == static_cast<int>(std::floor(256.0 / per_frame)) + 1);
+  CHECK(q_max <= 256.0f);
+  CHECK(q_max > 256.0f - 0.06f);
+  const std::uint16_t held = ctl.input_counts().meas_range;
+  CHECK(held > 1);
+  REQUIRE(ctl.take_status(&st));
+  CHECK(status_word(st, 2) == held);
+  CHECK(status_word(st, 3) == 0);
+  // a foreign motor and a short frame are malformed, not measurements
+  fb.motor = 3;
+  CHECK(!ctl.on_frame(cdam::c610::encode_feedback(fb), &cmd, &diag));
+  cdam::CanFrame short_frame = reference_frame(0.0f, 0.0f);
+  short_frame.dlc = 4;
+  CHECK(!ctl.on_frame(short_frame, &cmd, &diag));
+  CHECK(ctl.input_counts().frames == 2);
+}
+
+TEST_CASE("controller: a remote frame 0x3F1 requests the status frame") {
+  fw::Controller ctl;
+  cdam::CanFrame cmd, diag, st;
+  CHECK(!ctl.take_status(&st));
+  cdam::CanFrame req;
+  req.id = 0x3F1;
+  req.remote = true;
+  CHECK(!ctl.on_frame(req, &cmd, &diag));
+  CHECK(ctl.rejected() == 0);
+  REQUIRE(ctl.take_status(&st));
+  for (int k = 0; k < 4; ++k) CHECK(status_word(st, k) == 0);
 }

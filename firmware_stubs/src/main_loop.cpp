@@ -22,11 +22,12 @@ void handle(const cdam::slcan::Event& ev) {
   switch (ev.kind) {
     case Kind::Frame: {
       if (!g_open) return;
-      cdam::CanFrame cmd, diag;
+      cdam::CanFrame cmd, diag, status;
       if (g_ctl.on_frame(ev.frame, &cmd, &diag)) {
         send(cmd);
         send(diag);
       }
+      if (g_ctl.take_status(&status)) send(status);  // 0x3F1: a rejected input, or requested
       return;
     }
     case Kind::Open: case Kind::ListenOnly: g_open = true; break;

@@ -10,6 +10,9 @@
 // The decoder rejects what the Python codec (cdam_core.can.codec) rejects, with the same kinds.
 #pragma once
 #include <cstdint>
+#include <limits>
+
+#include "safe_size.hpp"
 
 namespace cdam {
 
@@ -142,7 +145,9 @@ class MotorState {
           0.5f * (static_cast<float>(fb.speed_rpm) + static_cast<float>(last_rpm_)) / 60.0f * dt *
           static_cast<float>(kCountsPerRev);
       const float wraps = (predicted - static_cast<float>(step)) / static_cast<float>(kCountsPerRev);
-      const long k = static_cast<long>(wraps >= 0.0f ? wraps + 0.5f : wraps - 0.5f);
+      // nearest integer, saturated (a NaN dt gives 0 wraps instead of an undefined cast)
+      const long k = round_saturate<long>(wraps, std::numeric_limits<long>::min(),
+                                          std::numeric_limits<long>::max());
       step += k * kCountsPerRev;
       turns_ += step;
     }

@@ -1,18 +1,17 @@
-// Levenberg-Marquardt training of a fixed-size BP network, heap-free (the target's twin of
-// levenberg_marquardt.hpp's train_lm, without a validation set).
+// The fixed-size, heap-free policy of the Levenberg-Marquardt loop (levenberg_marquardt.hpp's
+// lm_train): the target's J'J accumulator and solver, without a validation set.
 //
 // Net is a cdam::Mlp<Scalar, I, H, O, ActFn> with compile-time sizes; every buffer (J'J 58 x 58
-// for 4-8-2, the Cholesky factor, J'e, one sample's m x D Jacobian) is a fixed-size member, so an
-// LmFixed object (static on the target: about 2 D^2 Scalars) never allocates.
+// for 4-8-2, the Cholesky factor, J'e, the step, the trial point, one sample's m x D Jacobian)
+// is a fixed-size member, so an LmFixed object (static on the target: about 2 D^2 Scalars)
+// never allocates.
 //
-// Semantics are train_lm's (MATLAB trainlm), per epoch:
 //   evaluate: sse and mse = sse / (N m) (summed in double), J'e and J'J accumulated per sample
 //             from Mlp::forward and Mlp::jacobian (e = t - y), lower triangle of J'J only;
-//   record mse and mu; stop on goal (mse <= goal), epochs, min_grad (||J'e|| <= min_grad) or
-//   mu_max (mu >= mu_max), in that order;
-//   while mu <= mu_max: Cholesky of J'J + mu I (a non-positive pivot counts as a failure);
-//             d solves it against J'e, trial = theta + d; if mse(trial) < mse accept it,
-//             mu = max(mu mu_dec, 1e-20) and end the epoch; else (or on failure) mu *= mu_inc.
+//             ||J'e|| summed in double;
+//   solve:    Cholesky of J'J + mu I (a non-positive pivot is a failure), then the two
+//             triangular solves against J'e.
+// The loop (epochs, mu rule, stop order) is lm_train's, shared with the host's LmDynamic.
 // The Cholesky is plain loops (column by column, left-looking, sums in index order) rather than
 // Eigen::LLT: for a fixed 58 x 58 matrix Eigen's blocked factorisation goes through
 // triangular_solve_matrix with level-3 blocking, whose workspace falls back to malloc, so LLT
@@ -22,13 +21,14 @@
 #include <Eigen/Core>
 #include <cmath>
 
-#include "lm_options.hpp"
+#include "levenberg_marquardt.hpp"
 #include "mlp.hpp"
 #include "status.hpp"
 
 namespace cdam {
 
-// Options and stops: LmOptions / LmStop (lm_options.hpp); max_fail and threads do not apply.
+// Options and stops: LmOptions / LmStop (levenberg_marquardt.hpp); max_fail and threads do not
+// apply.
 
 template <typename Net>
 class LmFixed {
@@ -75,51 +75,51 @@ class LmFixed {
     return sse;
   }
 
-  // Trains theta (kD values, in place) on n samples. mse_hist / mu_hist (may be null) receive
-  // one value per recorded epoch, at most opt.epochs + 1; *recorded is their count.
+  // Trains theta (kD values, in place) on n samples with lm_train. mse_hist / mu_hist (may be
+  // null) receive one value per recorded epoch, at most opt.epochs + 1; *recorded is their count.
   Status train(Scalar* theta, const Scalar* X, const Scalar* T, Index n,
                const LmOptions& opt, double* mse_hist, double* mu_hist, int* recorded,
                LmStop* stop) {
     if (recorded) *recorded = 0;
     if (n < 1) return Status::Empty;
-    if (!opt.valid()) return Status::InvalidArgument;
-    Eigen::Map<Vec> th(theta);
-    const double nm = static_cast<double>(n) * kM;
-    double mse = evaluate(theta, X, T, n, false) / nm;
-    double mu = opt.mu;
-    LmStop why = LmStop::Epochs;
-    for (int epoch = 0;; ++epoch) {
-      evaluate(theta, X, T, n, true);
-      double g2 = 0.0;
-      for (int c = 0; c < kD; ++c) g2 += static_cast<double>(jte_[c]) * static_cast<double>(jte_[c]);
-      if (mse_hist) mse_hist[epoch] = mse;
-      if (mu_hist) mu_hist[epoch] = mu;
-      if (recorded) *recorded = epoch + 1;
-      if (mse <= opt.goal) { why = LmStop::Goal; break; }
-      if (epoch == opt.epochs) { why = LmStop::Epochs; break; }
-      if (std::sqrt(g2) <= opt.min_grad) { why = LmStop::MinGrad; break; }
-      if (mu >= opt.mu_max) { why = LmStop::MuMax; break; }
-      while (mu <= opt.mu_max) {
-        lhs_ = jtj_;
-        for (int c = 0; c < kD; ++c) lhs_(c, c) += static_cast<Scalar>(mu);
-        if (cholesky_inplace(lhs_)) {
-          step_ = jte_;
-          cholesky_solve(lhs_, step_);
-          trial_ = th + step_;
-          const double mse2 = evaluate(trial_.data(), X, T, n, false) / nm;
-          if (mse2 < mse) {
-            th = trial_;
-            mse = mse2;
-            mu = mu * opt.mu_dec > 1e-20 ? mu * opt.mu_dec : 1e-20;
-            break;
-          }
-        }
-        mu *= opt.mu_inc;
-      }
-    }
-    if (stop) *stop = why;
+    X_ = X;
+    T_ = T;
+    n_ = n;
+    LmResult r;
+    const Status st = lm_train(*this, theta, opt, &r, [&](int epoch, const LmEpoch& e) {
+      if (mse_hist) mse_hist[epoch] = e.mse;
+      if (mu_hist) mu_hist[epoch] = e.mu;
+    });
+    if (st != Status::Ok) return st;
+    if (recorded) *recorded = r.recorded;
+    if (stop) *stop = r.stop;
     return Status::Ok;
   }
+
+  // The policy of lm_train, on the samples given to train().
+  Index dim() const { return kD; }
+  double train_mse(const Scalar* theta) {
+    return evaluate(theta, X_, T_, n_, false) / (static_cast<double>(n_) * kM);
+  }
+  double normal(const Scalar* theta) {
+    evaluate(theta, X_, T_, n_, true);
+    double g2 = 0.0;
+    for (int c = 0; c < kD; ++c) g2 += static_cast<double>(jte_[c]) * static_cast<double>(jte_[c]);
+    return std::sqrt(g2);
+  }
+  bool solve(double mu) {
+    lhs_ = jtj_;
+    for (int c = 0; c < kD; ++c) lhs_(c, c) += static_cast<Scalar>(mu);
+    if (!cholesky_inplace(lhs_)) return false;
+    step_ = jte_;
+    cholesky_solve(lhs_, step_);
+    return true;
+  }
+  bool validation() const { return false; }
+  double val_mse(const Scalar*) { return 0.0; }
+  Scalar* step() { return step_.data(); }
+  Scalar* trial() { return trial_.data(); }
+  Scalar* best() { return nullptr; }  // no validation set on the target
 
   // Cholesky A = L L' in place on the lower triangle of A (the upper triangle is not read).
   // False when a pivot is not positive (or not finite).
@@ -163,6 +163,9 @@ class LmFixed {
   Eigen::Matrix<Scalar, kM, kD> J_;
   Eigen::Matrix<Scalar, kH, 1> a_;
   Eigen::Matrix<Scalar, kM, 1> y_, e_;
+  const Scalar* X_ = nullptr;  // the training set of the running train()
+  const Scalar* T_ = nullptr;
+  Index n_ = 0;
 };
 
 }  // namespace cdam

@@ -10,6 +10,8 @@
 #include <cstddef>
 
 #include "activation.hpp"
+#include "safe_size.hpp"
+#include "status.hpp"
 
 namespace cdam {
 
@@ -19,6 +21,15 @@ constexpr int mlp_params(int i, int h, int m) {
   return (i == Eigen::Dynamic || h == Eigen::Dynamic || m == Eigen::Dynamic)
              ? Eigen::Dynamic
              : i * h + h + h * m + m;
+}
+
+// D = i h + h + h m + m for run-time sizes, checked (safe_size.hpp): InvalidArgument when a size
+// is below 1, Overflow when D does not fit in Index. Run-time sizes given to an Mlp must have
+// passed this; Mlp::num_params() itself does not check.
+inline Status mlp_num_params(Index i, Index h, Index m, Index* D) {
+  if (i < 1 || h < 1 || m < 1) return Status::InvalidArgument;
+  using C = Checked<Index>;
+  return (C(i) * h + h + C(h) * m + m).get(D);
 }
 
 // ActFn: the activation policy (static Scalar apply(Activation, Scalar)); ExactActivation uses

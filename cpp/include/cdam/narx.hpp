@@ -10,17 +10,34 @@
 #include <algorithm>
 
 #include "mlp.hpp"
+#include "safe_size.hpp"
 #include "status.hpp"
 
 namespace cdam {
 
 struct NarxOrders {
   int na = 0, nb = 1, nk = 0;
-  int t0() const { return std::max(na, nk + nb - 1); }
-  Index regressors(Index n_in, Index n_out) const { return na * n_out + nb * n_in; }
+
+  // Orders valid (na, nb, nk >= 0 and na + nb >= 1: else InvalidArgument) and t0 representable
+  // in int (else Overflow; nk = 2^31 - 1 used to wrap t0 negative). t0() and regressors() assume
+  // that check() (and for regressors, check(n_in, n_out)) passed.
   Status check() const {
-    if (na < 0 || nb < 0 || nk < 0 || na + nb < 1) return Status::InvalidArgument;
-    return Status::Ok;
+    if (na < 0 || nb < 0 || nk < 0) return Status::InvalidArgument;
+    if (na == 0 && nb == 0) return Status::InvalidArgument;
+    int last = 0;  // nk + nb - 1, the oldest input lag
+    return (Checked<int>(nk) + (nb - 1)).get(&last);  // nb - 1 >= -1 cannot overflow
+  }
+  // check() and the regressor length na m + nb i representable in Index.
+  Status check(Index n_in, Index n_out) const {
+    const Status st = check();
+    if (st != Status::Ok) return st;
+    if (n_in < 0 || n_out < 0) return Status::InvalidArgument;
+    Index nr = 0;
+    return (Checked<Index>(na) * n_out + Checked<Index>(nb) * n_in).get(&nr);
+  }
+  int t0() const { return std::max(na, nk + nb - 1); }
+  Index regressors(Index n_in, Index n_out) const {
+    return static_cast<Index>(na) * n_out + static_cast<Index>(nb) * n_in;
   }
 };
 
@@ -39,7 +56,8 @@ void narx_regressor(const Scalar* U, Index ni, const Scalar* Y, Index no, const 
 template <typename Scalar>
 Status narx_regressors(const Scalar* U, Index ni, const Scalar* Y, Index no, Index n,
                        const NarxOrders& o, Scalar* X) {
-  if (o.check() != Status::Ok) return Status::InvalidArgument;
+  const Status st = o.check(ni, no);
+  if (st != Status::Ok) return st;
   const Index t0 = o.t0();
   if (n <= t0) return Status::TooFewSamples;
   const Index nr = o.regressors(ni, no);
@@ -53,8 +71,9 @@ template <typename Scalar, int I, int H, int O>
 Status narx_simulate(const Mlp<Scalar, I, H, O>& net, const Scalar* theta, const Scalar* U,
                      Scalar* Y, Index n, Index ni, const NarxOrders& o, Scalar* reg,
                      Scalar* hidden) {
-  if (o.check() != Status::Ok) return Status::InvalidArgument;
   const Index no = net.outputs();
+  const Status st = o.check(ni, no);
+  if (st != Status::Ok) return st;
   if (net.inputs() != o.regressors(ni, no)) return Status::SizeMismatch;
   const Index t0 = o.t0();
   if (n <= t0) return Status::TooFewSamples;

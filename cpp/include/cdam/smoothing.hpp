@@ -1,6 +1,8 @@
 // Five-point cubic smoothing ("five-spot triple smoothing"): least-squares cubic over a sliding
 // 5-point window, with the two one-sided formulas at each end (ALGORITHMS.md; equals
 // scipy.signal.savgol_filter(y, 5, 3, mode="interp")). In place, O(1) extra memory, no heap.
+// `poll` (status.hpp: a callable bool(), NeverCancel by default) is asked before every pass;
+// false stops the passes with Status::Cancelled (the bindings stop on Ctrl-C this way).
 #pragma once
 #include <cstddef>
 
@@ -9,14 +11,15 @@
 namespace cdam {
 
 // One channel of n samples at y[0], y[stride], ..., smoothed `passes` times in place.
-template <typename Scalar>
+template <typename Scalar, typename Poll = NeverCancel>
 Status five_point_cubic_smooth_inplace(Scalar* y, std::ptrdiff_t n, std::ptrdiff_t stride,
-                                       int passes) {
+                                       int passes, Poll poll = Poll()) {
   if (passes < 0) return Status::InvalidArgument;
   if (n < 5) return Status::TooFewSamples;
   const Scalar c35 = Scalar(35), c70 = Scalar(70);
   auto at = [&](std::ptrdiff_t i) -> Scalar& { return y[i * stride]; };
   for (int p = 0; p < passes; ++p) {
+    if (!poll()) return Status::Cancelled;
     const Scalar a0 = at(0), a1 = at(1), a2 = at(2), a3 = at(3), a4 = at(4);
     at(0) = (Scalar(69) * a0 + Scalar(4) * a1 - Scalar(6) * a2 + Scalar(4) * a3 - a4) / c70;
     at(1) = (Scalar(2) * a0 + Scalar(27) * a1 + Scalar(12) * a2 - Scalar(8) * a3 + Scalar(2) * a4) / c35;
@@ -41,9 +44,9 @@ Status five_point_cubic_smooth_inplace(Scalar* y, std::ptrdiff_t n, std::ptrdiff
 // A samples x channels array in row-major (C) order: every channel smoothed in place, all
 // channels of a sample together (contiguous, vectorisable). work: 3 * channels scalars of caller
 // storage (the originals of the three previous samples).
-template <typename Scalar>
+template <typename Scalar, typename Poll = NeverCancel>
 Status five_point_cubic_smooth_rows(Scalar* data, std::ptrdiff_t samples, std::ptrdiff_t channels,
-                                    int passes, Scalar* work) {
+                                    int passes, Scalar* work, Poll poll = Poll()) {
   if (channels < 1) return Status::Empty;
   if (passes < 0) return Status::InvalidArgument;
   if (samples < 5) return Status::TooFewSamples;
@@ -54,6 +57,7 @@ Status five_point_cubic_smooth_rows(Scalar* data, std::ptrdiff_t samples, std::p
   auto row = [&](std::ptrdiff_t i) { return data + i * C; };
   const Scalar c35 = Scalar(35), c70 = Scalar(70);
   for (int p = 0; p < passes; ++p) {
+    if (!poll()) return Status::Cancelled;
     Scalar *r0 = row(0), *r1 = row(1), *r2 = row(2), *r3 = row(3), *r4 = row(4);
     for (std::ptrdiff_t c = 0; c < C; ++c) {
       const Scalar a0 = r0[c], a1 = r1[c], a2 = r2[c], a3 = r3[c], a4 = r4[c];

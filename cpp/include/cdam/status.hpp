@@ -11,6 +11,15 @@ enum class Status {
   NonFinite,         // NaN or Inf in an input
   InvalidArgument,   // an argument outside its domain (negative passes, zero hidden nodes, ...)
   NotPositiveDefinite,  // a normal-equation matrix could not be factorised
+  Overflow,          // a size, lag or count does not fit its integer type (safe_size.hpp)
+  Diverged,          // an integration produced NaN or Inf from finite inputs
+  Cancelled,         // a poll hook asked the loop to stop (e.g. Ctrl-C in Python)
+};
+
+// The default poll hook of long loops (passes, epochs, iterations): never stops them. A hook is
+// any callable bool() returning false to stop; the loop then returns Status::Cancelled.
+struct NeverCancel {
+  constexpr bool operator()() const { return true; }
 };
 
 inline const char* to_string(Status s) {
@@ -22,6 +31,9 @@ inline const char* to_string(Status s) {
     case Status::NonFinite: return "contains NaN or Inf";
     case Status::InvalidArgument: return "invalid argument";
     case Status::NotPositiveDefinite: return "matrix not positive definite";
+    case Status::Overflow: return "size overflows";
+    case Status::Diverged: return "diverged (NaN or Inf)";
+    case Status::Cancelled: return "cancelled";
   }
   return "unknown status";
 }

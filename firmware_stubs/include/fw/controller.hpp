@@ -3,14 +3,29 @@
 // [q1, w1, i1, q2, w2, i2] (scaled, forward, back-scaled) -> joint PID -> 0x200 current command
 // out. A cycle runs when both motors have reported since the last cycle.
 //
-// Extra frames (not C610): 0x300 in, two little-endian float32 joint references (rad);
-// 0x3F0 out after each command: float32 model output 0, uint16 cycle counter, uint16 count of
-// rejected frames (diagnostics for the processor-in-the-loop test).
+// Extra frames (not C610), all little-endian, defined here:
+//   0x300 in   reference: two float32 joint references (rad), both finite and within
+//              +-config::kJointRangeRad, else the whole frame is rejected and the last valid
+//              references are held;
+//   0x3F0 out  diagnostic, after each command: float32 model output 0, uint16 cycle counter,
+//              uint16 count of rejected frames (all kinds; for the processor-in-the-loop test);
+//   0x3F1 out  status: four uint16 counters (saturating at 65535) of rejected inputs:
+//              [0-1] references not finite, [2-3] references beyond +-kJointRangeRad,
+//              [4-5] measurements out of range (a C610 field outside its protocol range, or a
+//              joint angle beyond +-kJointRangeRad: the motor's last valid state is held),
+//              [6-7] malformed or foreign frames (wrong length, remote, extended, unknown id,
+//              motors 3-8). Sent after any frame that changed a counter and on request (a
+//              remote frame with id 0x3F1).
+// Inputs are checked before they reach the PID, so no NaN or Inf can latch its integrator; the
+// current command is converted by round_saturate (NaN -> 0 A, clamped to the C610's
+// +-10000 counts), never by a plain float -> int cast.
 #pragma once
+#include <cmath>
 #include <cstdint>
 #include <cstring>
 
 #include "cdam/c610.hpp"
+#include "cdam/safe_size.hpp"
 #include "fw/config.hpp"
 #include "fw/model_runner.hpp"
 
@@ -18,6 +33,7 @@ namespace fw {
 
 constexpr std::uint32_t kReferenceId = 0x300;
 constexpr std::uint32_t kDiagnosticId = 0x3F0;
+constexpr std::uint32_t kStatusId = 0x3F1;
 constexpr int kFeatures = 6;  // q1, w1, i1, q2, w2, i2
 
 class JointPid {
@@ -33,32 +49,60 @@ class JointPid {
     if (u < -config::kCurrentLimitA) u = -config::kCurrentLimitA;
     return u;
   }
+  float integral() const { return integral_; }
 
  private:
   float integral_ = 0.0f;
 };
 
+// Current (A) -> C610 counts, rounded half away from zero and saturated to +-kCurrentLimit;
+// NaN gives 0 A (a plain cast of NaN or of an out-of-range float is undefined behaviour).
 inline std::int16_t amps_to_counts(float a) {
-  const float c = a / cdam::c610::kAmpsPerCount;
-  return cdam::c610::clamp_current(static_cast<long>(c >= 0.0f ? c + 0.5f : c - 0.5f));
+  constexpr auto lim = static_cast<std::int16_t>(cdam::c610::kCurrentLimit);
+  return cdam::round_saturate<std::int16_t>(a / cdam::c610::kAmpsPerCount,
+                                            static_cast<std::int16_t>(-lim), lim);
 }
+
+// A joint angle the loop accepts (reference or measurement): finite, |q| <= kJointRangeRad.
+inline bool joint_angle_ok(float q) {
+  return std::isfinite(q) && q <= config::kJointRangeRad && q >= -config::kJointRangeRad;
+}
+
+// Counters of rejected inputs (the 0x3F1 status frame), saturating at 65535.
+struct InputCounts {
+  std::uint16_t ref_nonfinite = 0, ref_range = 0, meas_range = 0, frames = 0;
+  static void bump(std::uint16_t& c) {
+    if (c != 0xFFFF) ++c;
+  }
+};
 
 class Controller {
  public:
   // Feed one received frame. Returns true when a cycle ran; *cmd and *diag are then the
   // frames to send.
   bool on_frame(const cdam::CanFrame& f, cdam::CanFrame* cmd, cdam::CanFrame* diag) {
+    if (!f.extended && f.id == kStatusId && f.remote) {
+      status_due_ = true;
+      return false;
+    }
     if (!f.extended && !f.remote && f.id == kReferenceId && f.dlc == 8) {
-      std::memcpy(ref_, f.data, 8);  // little-endian float32 pair (the target is little-endian)
+      float r[2];
+      std::memcpy(r, f.data, 8);  // little-endian float32 pair (the target is little-endian)
+      if (!std::isfinite(r[0]) || !std::isfinite(r[1])) return reject(counts_.ref_nonfinite);
+      if (!joint_angle_ok(r[0]) || !joint_angle_ok(r[1])) return reject(counts_.ref_range);
+      ref_[0] = r[0];
+      ref_[1] = r[1];
       return false;
     }
     cdam::c610::Feedback fb;
-    if (cdam::c610::decode_feedback(f, &fb) != cdam::c610::Decode::Ok || fb.motor > 2) {
-      ++rejected_;
-      return false;
-    }
+    const cdam::c610::Decode d = cdam::c610::decode_feedback(f, &fb);
+    if (d == cdam::c610::Decode::OutOfRange) return reject(counts_.meas_range);
+    if (d != cdam::c610::Decode::Ok || fb.motor > 2) return reject(counts_.frames);
     const int j = fb.motor - 1;
-    motors_[j].update(fb, config::kDt);
+    cdam::c610::MotorState next = motors_[j];
+    next.update(fb, config::kDt);
+    if (!joint_angle_ok(next.theta())) return reject(counts_.meas_range);  // hold the last
+    motors_[j] = next;
     fresh_ |= 1u << j;
     if (fresh_ != 3u) return false;
     fresh_ = 0;
@@ -66,13 +110,38 @@ class Controller {
     return true;
   }
 
+  // The 0x3F1 status frame, when one is due (a counter changed since the last, or it was
+  // requested); the loop sends it after handling the frame.
+  bool take_status(cdam::CanFrame* out) {
+    if (!status_due_) return false;
+    status_due_ = false;
+    cdam::CanFrame st;
+    st.id = kStatusId;
+    st.dlc = 8;
+    const std::uint16_t v[4] = {counts_.ref_nonfinite, counts_.ref_range, counts_.meas_range,
+                                counts_.frames};
+    std::memcpy(st.data, v, 8);
+    *out = st;
+    return true;
+  }
+
   const float* features() const { return x_; }
   const float* model_outputs() const { return y_; }
   const float* currents() const { return u_; }
+  const float* references() const { return ref_; }
+  float integral(int j) const { return pid_[j].integral(); }
+  const InputCounts& input_counts() const { return counts_; }
   std::uint32_t cycles() const { return cycles_; }
   std::uint32_t rejected() const { return rejected_; }
 
  private:
+  bool reject(std::uint16_t& counter) {
+    InputCounts::bump(counter);
+    ++rejected_;
+    status_due_ = true;
+    return false;
+  }
+
   void step(cdam::CanFrame* cmd, cdam::CanFrame* diag) {
     for (int j = 0; j < 2; ++j) {
       x_[3 * j] = motors_[j].theta();
@@ -109,6 +178,8 @@ class Controller {
   unsigned fresh_ = 0;
   std::uint32_t cycles_ = 0;
   std::uint32_t rejected_ = 0;
+  InputCounts counts_;
+  bool status_due_ = false;
 };
 
 }  // namespace fw

@@ -2,20 +2,17 @@
 // on the host. 20 butterflies (cdam/optim/iboa.hpp, Swarm<float, 58, 20>) search the weights of
 // a 4-8-2 tansig network (cdam::Mlp with FastActivation, pure float arithmetic) on the 200
 // samples of generated/optim_data.hpp (flash on the target); the best butterfly then seeds
-// kLmEpochs Levenberg-Marquardt epochs (cdam/lm_fixed.hpp). Shared random generator seed kSeed.
-// Nothing allocates: the Swarm and the LM workspace live in a caller-owned Workspace (static).
-//
-// The fitness is MseFitness below: the semantics of cdam::optim::MlpFitness
-// (cdam/optim/bp_fitness.hpp; MSE = sum over samples of Mlp::forward's squared errors, in Scalar,
-// divided by n m). It is not taken from bp_fitness.hpp because that header also holds the host's
-// threaded BpFitness and includes <mutex>, <condition_variable> and <thread>; arm-none-eabi's
-// newlib has no gthreads, so std::mutex is undeclared there and the include fails to compile.
+// kLmEpochs Levenberg-Marquardt epochs (the core's one LM loop, cdam/levenberg_marquardt.hpp,
+// with its fixed-size policy cdam/lm_fixed.hpp). Shared random generator seed kSeed. The
+// fitness is the core's cdam::optim::MlpFitness (cdam/optim/mlp_fitness.hpp). Nothing
+// allocates: the Swarm and the LM workspace live in a caller-owned Workspace (static).
 #pragma once
 #include <cstdint>
 
 #include "cdam/fast_math.hpp"
 #include "cdam/lm_fixed.hpp"
 #include "cdam/optim/iboa.hpp"
+#include "cdam/optim/mlp_fitness.hpp"
 #include "optim_data.hpp"
 
 namespace fw::optim_run {
@@ -29,37 +26,6 @@ constexpr std::uint32_t kSeed = 7;
 constexpr int kCurveMax = kIterations + 1 + kLmEpochs + 1;
 static_assert(cdam_optim_data::kInputs == Net::kInputs && cdam_optim_data::kOutputs ==
               Net::kOutputs, "generated/optim_data.hpp: sizes differ from the network");
-
-// Fitness concept of cdam/optim/swarm.hpp on caller-owned data (X: i x n, T: m x n, one sample
-// per column), no heap.
-template <typename NetT>
-class MseFitness {
- public:
-  using Scalar = typename NetT::Scalar;
-  MseFitness(const NetT& net, const Scalar* X, const Scalar* T, cdam::Index n)
-      : net_(net), X_(X), T_(T), n_(n) {}
-  Scalar operator()(const Scalar* theta) {
-    Scalar sse = 0;
-    for (cdam::Index s = 0; s < n_; ++s) {
-      net_.forward(theta, X_ + s * NetT::kInputs, a_, y_);
-      for (int k = 0; k < NetT::kOutputs; ++k) {
-        const Scalar e = T_[s * NetT::kOutputs + k] - y_[k];
-        sse += e * e;
-      }
-    }
-    return sse / static_cast<Scalar>(n_ * NetT::kOutputs);
-  }
-  void batch(const Scalar* thetas, cdam::Index count, Scalar* out) {
-    for (cdam::Index k = 0; k < count; ++k) out[k] = (*this)(thetas + k * NetT::kParams);
-  }
-
- private:
-  NetT net_;
-  const Scalar* X_;
-  const Scalar* T_;
-  cdam::Index n_;
-  Scalar a_[NetT::kHidden], y_[NetT::kOutputs];
-};
 
 struct Workspace {
   cdam::optim::Swarm<float, kD, kPop> swarm;
@@ -80,7 +46,7 @@ struct Result {
 inline Result run(Workspace& w, double* curve) {
   Result res;
   const Net net;
-  MseFitness<Net> fitness(net, cdam_optim_data::kX, cdam_optim_data::kT,
+  cdam::optim::MlpFitness<Net> fitness(net, cdam_optim_data::kX, cdam_optim_data::kT,
                                        cdam_optim_data::kSamples);
   cdam::optim::IboaOptions opt;
   opt.boa.iterations = kIterations;

@@ -41,6 +41,7 @@ struct BoaOptions {
 
   Status check(Index n) const {
     if (n < 2) return Status::InvalidArgument;
+    if (!fits<int>(n)) return Status::Overflow;  // int labels; Rng::index takes 32 bits
     if (iterations < 0 || !(p >= 0 && p <= 1) || !(c > 0) || !std::isfinite(a) || !(lb < ub) ||
         !std::isfinite(lb) || !std::isfinite(ub))
       return Status::InvalidArgument;
@@ -93,9 +94,9 @@ class Boa {
   }
 
   // init + iterations; curve (iterations + 1 values, may be null) gets the best fitness.
-  template <typename Fitness>
-  Status run(SwarmT& s, Fitness& fitness, Rng& rng, double* curve) {
-    return run_optimiser(*this, s, fitness, rng, opt_.iterations, curve);
+  template <typename Fitness, typename Poll = NeverCancel>
+  Status run(SwarmT& s, Fitness& fitness, Rng& rng, double* curve, Poll poll = Poll()) {
+    return run_optimiser(*this, s, fitness, rng, opt_.iterations, curve, poll);
   }
 
  private:

@@ -37,6 +37,7 @@ struct CabcOptions {
 
   Status check(Index n) const {
     if (n < 4) return Status::InvalidArgument;  // at least two food sources
+    if (!fits<int>(n)) return Status::Overflow;  // int labels; Rng::index takes 32 bits
     if (iterations < 0 || limit < 0 || !(lb < ub) || !std::isfinite(lb) || !std::isfinite(ub) ||
         scout_candidates < 1 || scout_candidates > n || !(scout_radius > 0))
       return Status::InvalidArgument;
@@ -58,6 +59,7 @@ class Cabc {
   Status init(SwarmT& s, Fitness& fitness, Rng& rng) {
     const Status st = opt_.check(s.size());
     if (st != Status::Ok) return st;
+    if (!fits<std::uint32_t>(s.dim())) return Status::Overflow;  // Rng::index(D)
     const Index sn = sources(s);
     const Scalar lb = Scalar(opt_.lb), ub = Scalar(opt_.ub);
     chaos_.seed(rng);
@@ -96,9 +98,9 @@ class Cabc {
     if (s.counter[w] > opt_.limit) scout(s, fitness, w);
   }
 
-  template <typename Fitness>
-  Status run(SwarmT& s, Fitness& fitness, Rng& rng, double* curve) {
-    return run_optimiser(*this, s, fitness, rng, opt_.iterations, curve);
+  template <typename Fitness, typename Poll = NeverCancel>
+  Status run(SwarmT& s, Fitness& fitness, Rng& rng, double* curve, Poll poll = Poll()) {
+    return run_optimiser(*this, s, fitness, rng, opt_.iterations, curve, poll);
   }
 
  private:

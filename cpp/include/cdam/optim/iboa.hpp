@@ -78,9 +78,9 @@ class Iboa {
     elite(s, fitness);
   }
 
-  template <typename Fitness>
-  Status run(SwarmT& s, Fitness& fitness, Rng& rng, double* curve) {
-    return run_optimiser(*this, s, fitness, rng, opt_.boa.iterations, curve);
+  template <typename Fitness, typename Poll = NeverCancel>
+  Status run(SwarmT& s, Fitness& fitness, Rng& rng, double* curve, Poll poll = Poll()) {
+    return run_optimiser(*this, s, fitness, rng, opt_.boa.iterations, curve, poll);
   }
 
  private:

@@ -17,6 +17,7 @@
 
 #include "../mlp.hpp"
 #include "../rng.hpp"
+#include "../safe_size.hpp"
 #include "../status.hpp"
 
 namespace cdam::optim {
@@ -81,14 +82,16 @@ inline Index arg_extreme(const V& v, Index n, bool largest = false) {
 }
 
 // init, then `iterations` iterations of any optimiser with init()/iterate() (BOA, IBOA, CABC);
-// curve (iterations + 1 values, may be null) receives the best fitness after each.
-template <typename Optimiser, typename SwarmT, typename Fitness>
+// curve (iterations + 1 values, may be null) receives the best fitness after each. `poll`
+// (status.hpp) is asked before every iteration; false ends the run with Status::Cancelled.
+template <typename Optimiser, typename SwarmT, typename Fitness, typename Poll = NeverCancel>
 Status run_optimiser(Optimiser& o, SwarmT& s, Fitness& fitness, Rng& rng, int iterations,
-                     double* curve) {
+                     double* curve, Poll poll = Poll()) {
   const Status st = o.init(s, fitness, rng);
   if (st != Status::Ok) return st;
   if (curve) curve[0] = static_cast<double>(s.best_fit);
   for (int t = 1; t <= iterations; ++t) {
+    if (!poll()) return Status::Cancelled;
     o.iterate(s, fitness, rng);
     if (curve) curve[t] = static_cast<double>(s.best_fit);
   }

@@ -9,11 +9,15 @@
 // (Im_eff <= Im makes sqrt(Ks/Im) a lower bound of the two-mass frequency; the factor
 // sqrt(1 + Im/I_link) is below 1.1 here and covered by the margin) and require
 // h * rate_max <= kRk4StabilityLimit = 2.5, i.e. substeps = ceil(dt * rate_max / 2.5).
+// A step that leaves the state NaN or Inf (dt too large for the sub-steps given) ends the run
+// with Status::Diverged; the states written before it stay valid.
 #pragma once
 #include <Eigen/Core>
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
+#include "cdam/safe_size.hpp"
 #include "cdam/sim/controllers.hpp"
 #include "cdam/sim/coupling.hpp"
 #include "cdam/sim/effects.hpp"
@@ -36,8 +40,10 @@ inline double fastest_rate(const PlantParams& p, double dz_max = 0.2) {
   return r;
 }
 
+// At least 1; saturates at INT_MAX for a huge dt (NaN gives 1) instead of an undefined cast.
 inline int substeps_for(const PlantParams& p, double dt) {
-  return std::max(1, static_cast<int>(std::ceil(dt * fastest_rate(p) / kRk4StabilityLimit)));
+  return round_saturate<int>(std::ceil(dt * fastest_rate(p) / kRk4StabilityLimit), 1,
+                             std::numeric_limits<int>::max());
 }
 
 inline void normalise_quaternion(State& x) { x.segment<4>(3) /= x.segment<4>(3).norm(); }
@@ -70,6 +76,7 @@ inline Status simulate_open_loop(const PlantParams& p, const double* x0, const d
     const double t = k * dt;
     for (int j = 0; j < substeps; ++j) rk4_step<kNx>(f, t + j * h, x, h);
     normalise_quaternion(x);
+    if (!x.allFinite()) return Status::Diverged;
     Eigen::Map<State> x_next(X + (k + 1) * kNx);
     x_next = x;
   }
@@ -84,8 +91,10 @@ inline Status simulate_closed_loop(const PlantParams& p, const ControlParams& c,
                                    const double* SP, long n, double dt, int substeps, double* X,
                                    double* LOG) {
   if (n < 1 || !(dt > 0) || substeps < 1) return Status::InvalidArgument;
+  if (!(c.delay_rotor >= 0 && c.delay_rotor <= kMaxDelay && c.delay_joint >= 0 &&
+        c.delay_joint <= kMaxDelay))
+    return Status::InvalidArgument;  // before the casts: NaN or a huge delay is no int
   const int dr = static_cast<int>(c.delay_rotor), dj = static_cast<int>(c.delay_joint);
-  if (dr < 0 || dj < 0 || dr > kMaxDelay || dj > kMaxDelay) return Status::InvalidArgument;
   State x = Eigen::Map<const State>(x0);
   CtrlState cs = CtrlState::Zero();
   cs.segment<3>(8) = x.segment<3>(14);
@@ -116,6 +125,7 @@ inline Status simulate_closed_loop(const PlantParams& p, const ControlParams& c,
     const double t = k * dt;
     for (int j = 0; j < substeps; ++j) rk4_step<kNx>(f, t + j * h, x, h);
     normalise_quaternion(x);
+    if (!x.allFinite()) return Status::Diverged;
   }
   return Status::Ok;
 }

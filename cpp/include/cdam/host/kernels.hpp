@@ -1,4 +1,5 @@
-// Host kernels of the BP fitness and of the normal equations, in double: the sum of squared
+// Vectorised host kernels of the BP network, in double (shared by host/normal_equations.hpp and
+// host/bp_fitness.hpp, hence here and not under optim/): the sum of squared
 // errors ("sse") of one network over a range of samples (`sse_soa`), the hidden activation over
 // a buffer (`activate_inplace`), and the rank update G += V V' (`syrk_lower`, the J'J blocks of
 // normal_equations.hpp). The SSE loop is written as plain loops over samples that the compiler vectorises, in a
@@ -33,6 +34,9 @@
 // Measured (10,000 samples, 6-20-8, shared 2-core AMD EPYC, load 3-7): the SSE kernel 0.65-0.9
 // ms CPU per evaluation (the former Eigen version 3.5-7 ms), the activation of 200,000 values
 // 0.28 ms (std::tanh 3.8 ms), the 160 x 160 rank update over 10,000 samples 13 ms (Eigen 41).
+#ifdef CDAM_TARGET_EMBEDDED
+#error "cdam/host/kernels.hpp is host-only (x86 AVX2 dispatch, GCC vector extensions)"
+#endif
 #pragma once
 #include <cmath>
 #include <cstdint>
@@ -41,7 +45,7 @@
 #include "../activation.hpp"
 #include "../mlp.hpp"
 
-namespace cdam::optim {
+namespace cdam::host {
 
 namespace kernel {
 
@@ -302,4 +306,4 @@ inline void syrk_lower(double* G, Index ldg, const double* V, Index ldv, Index P
   kernel::generic::syrk_lower(G, ldg, V, ldv, P, nb);
 }
 
-}  // namespace cdam::optim
+}  // namespace cdam::host

@@ -12,12 +12,15 @@
 // m D^2 of forming J'J from J: for 6-20-8 about 12,700 against 759,000.
 //
 // On a CPU with AVX2 + FMA (double), S, C and R come from one fused rank update of the stacked
-// [v; a] (optim/sse_kernel.hpp syrk_lower, about three times Eigen's SSE2 rankUpdate);
+// [v; a] (host/kernels.hpp syrk_lower, about three times Eigen's SSE2 rankUpdate);
 // otherwise from Eigen's rankUpdate and product, as written above.
-// The hidden activation (double) is the vectorised one of optim/sse_kernel.hpp (within 5e-16 of
+// The hidden activation (double) is the vectorised one of host/kernels.hpp (within 5e-16 of
 // std::tanh / the logistic function; about ten times faster than the scalar libm call).
 // This is host code: the workspace is allocated once, in the constructor (the one place that
 // allocates); evaluate() allocates nothing.
+#ifdef CDAM_TARGET_EMBEDDED
+#error "cdam/host/normal_equations.hpp is host-only (allocates, std::thread, AVX2 kernels)"
+#endif
 #pragma once
 #include <Eigen/Core>
 #include <algorithm>
@@ -25,8 +28,8 @@
 #include <type_traits>
 #include <vector>
 
-#include "mlp.hpp"
-#include "optim/sse_kernel.hpp"
+#include "../mlp.hpp"
+#include "kernels.hpp"
 
 namespace cdam {
 
@@ -96,7 +99,7 @@ class NormalEquations {
           A(h, B), D(h, B), Y(m, B), E(m, B), G(h, B), V(h * (i + 1) + h, B),
           S(h * (i + 1), h * (i + 1)), R(h + 1, h + 1), C(h + 1, h * (i + 1)), gH(h, i + 1),
           gO(m, h + 1) {
-      if constexpr (std::is_same<Scalar, double>::value) fused = optim::avx2_path(optim::KernelPath::Auto);
+      if constexpr (std::is_same<Scalar, double>::value) fused = host::avx2_path(host::KernelPath::Auto);
       else fused = false;
       if (fused) K.resize(h * (i + 2), h * (i + 2));
     }
@@ -107,7 +110,7 @@ class NormalEquations {
       a.colwise() += net.b1(theta);
       const Activation act = net.activation();
       if constexpr (std::is_same<Scalar, double>::value)
-        optim::activate_inplace(a.data(), h * nb, act);  // vectorised, within 5e-16 of std::tanh
+        host::activate_inplace(a.data(), h * nb, act);  // vectorised, within 5e-16 of std::tanh
       else
         a = a.unaryExpr([act](Scalar v) { return activate(act, v); });
       auto y = Y.leftCols(nb);
@@ -149,7 +152,7 @@ class NormalEquations {
         if constexpr (std::is_same<Scalar, double>::value) {
           if (fused) {
             V.block(P, 0, h, nb) = a;
-            optim::syrk_lower(K.data(), K.rows(), V.data(), V.rows(), P + h, nb);
+            host::syrk_lower(K.data(), K.rows(), V.data(), V.rows(), P + h, nb);
           }
         }
         if (!fused) {

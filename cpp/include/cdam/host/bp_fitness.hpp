@@ -1,19 +1,18 @@
-// The BP fitness of the optimisers: training MSE, in normalised units, of the network whose
-// parameters are the individual, MSE = sum (T - Y)^2 / (N m) (DESIGN.md). Minimised; the
-// pipelines report the "adaptation value" 1 / (1 + MSE).
-//
-// MlpFitness<Net> (target and host, any Mlp<Scalar, I, H, O>): Mlp::forward per sample on
-// caller-owned data, no heap (fixed sizes: the hidden and output buffers are members).
+// The host's BP fitness of the optimisers (semantics: optim/mlp_fitness.hpp, MSE = sum (T - Y)^2
+// / (N m), minimised), fast and threaded.
 //
 // BpFitness<Scalar> (host): the record is copied once into a channel-contiguous layout and
 // cut into a fixed number of contiguous chunks that depends only on N; every (individual,
-// chunk) partial SSE is computed by one thread with the vectorised kernel of sse_kernel.hpp
+// chunk) partial SSE is computed by one thread with the vectorised kernel of host/kernels.hpp
 // (blocks of 128 samples, one exponential and one division per activation, AVX2 + FMA when
 // the CPU has them). threads - 1 pool threads, started by the constructor and parked on a
 // condition variable between batches, and the caller take tasks from a shared counter (a
 // descheduled thread delays only the chunk it holds); the partials of an individual are summed
 // in chunk order. The result is therefore bit-identical for any thread count. The constructor allocates (the one place);
 // evaluating allocates nothing unless a batch is larger than any seen before.
+#ifdef CDAM_TARGET_EMBEDDED
+#error "cdam/host/bp_fitness.hpp is host-only (std::thread, std::mutex, std::vector); the target uses cdam/optim/mlp_fitness.hpp"
+#endif
 #pragma once
 #include <Eigen/Core>
 #include <algorithm>
@@ -25,47 +24,13 @@
 #include <vector>
 
 #include "../mlp.hpp"
-#include "../normal_equations.hpp"
-#include "sse_kernel.hpp"
+#include "../optim/mlp_fitness.hpp"
+#include "kernels.hpp"
+#include "normal_equations.hpp"
 
 namespace cdam::optim {
 
-template <typename Net>
-class MlpFitness {
- public:
-  using Scalar = typename Net::Scalar;
-
-  // X: i x n inputs, T: m x n targets, column-major (one sample per column), caller-owned.
-  MlpFitness(const Net& net, const Scalar* X, const Scalar* T, Index n)
-      : net_(net), X_(X), T_(T), n_(n), a_(net.hidden()), y_(net.outputs()) {}
-
-  Index dim() const { return net_.num_params(); }
-
-  Scalar operator()(const Scalar* theta) {
-    const Index i = net_.inputs(), m = net_.outputs();
-    Scalar sse = 0;
-    for (Index s = 0; s < n_; ++s) {
-      net_.forward(theta, X_ + s * i, a_.data(), y_.data());
-      for (Index k = 0; k < m; ++k) {
-        const Scalar e = T_[s * m + k] - y_[k];
-        sse += e * e;
-      }
-    }
-    return sse / static_cast<Scalar>(n_ * m);
-  }
-
-  void batch(const Scalar* thetas, Index count, Scalar* out) {
-    for (Index k = 0; k < count; ++k) out[k] = (*this)(thetas + k * dim());
-  }
-
- private:
-  Net net_;
-  const Scalar* X_;
-  const Scalar* T_;
-  Index n_;
-  Eigen::Matrix<Scalar, Net::kHidden, 1> a_;
-  Eigen::Matrix<Scalar, Net::kOutputs, 1> y_;
-};
+using host::KernelPath;
 
 // BpFitness<double> (host, any thread count); the kernel is double only.
 template <typename Scalar>
@@ -186,7 +151,7 @@ class BpFitness {
 
   double chunk_sse(const Scalar* theta, Index lo, Index hi, int t) {
     Scalar* a = work_.data() + static_cast<size_t>(t) * net_.hidden() * kBlock;
-    return sse_soa(net_, theta, xs_.data() + lo, ts_.data() + lo, n_, hi - lo, a, kBlock, path_);
+    return host::sse_soa(net_, theta, xs_.data() + lo, ts_.data() + lo, n_, hi - lo, a, kBlock, path_);
   }
 
   Mlp<Scalar> net_;

@@ -1,0 +1,37 @@
+"""Ctrl-C stops the long native loops (issue 24 item 5): SIGINT sent to a child running a call
+that would take minutes to hours ends it with KeyboardInterrupt within a few seconds (the
+bindings poll Python's signal handlers from the loop; before, the signal waited for the loop
+to finish). Each call runs in its own child interpreter (tests/robust/_subproc.py)."""
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _subproc import interrupt_call  # noqa: E402
+
+GRACE = 5.0  # seconds from SIGINT to exit
+
+NET = ("rng = np.random.default_rng(0)\n"
+       "X = rng.uniform(-1, 1, (20000, 6)); T = np.tanh(X @ rng.uniform(-1, 1, (6, 8)))\n"
+       "T += 0.1 * rng.standard_normal(T.shape)\n"
+       "th = rng.uniform(-0.5, 0.5, _core.mlp_num_params(6, 20, 8))\n")
+
+
+@pytest.mark.parametrize("expr, setup", [
+    # 2**31 - 1 passes over 10 samples: about a minute of work
+    ("_core.five_point_cubic_smooth(np.ones(10), 2**31 - 1)", ""),
+    ("_core.five_point_cubic_smooth(np.ones((100, 3)), 2**31 - 1)", ""),
+    # LM with no stop criterion reachable soon (goal 0, min_grad 0) on a noisy 20,000-sample
+    # record: an epoch costs tens of ms, 10**7 epochs would take days
+    ("_core.train_lm(th, X, T, 20, epochs=10**7, min_grad=0.0, threads=1)", NET),
+    ("_core.train_gd(th, X, T, 20, lr=1e-4, epochs=2**31 - 1, threads=1)", NET),
+    # 2 * 10**7 BOA iterations of 20 sphere evaluations
+    ("_core.optimise('boa', 'sphere', dim=4, options={'iterations': 2 * 10**7})", ""),
+    ("_core.optimise('cabc', 'sphere', dim=4, options={'iterations': 2 * 10**7})", ""),
+])
+def test_sigint_stops_a_long_native_loop(expr, setup):
+    res = interrupt_call(expr, setup=setup, delay=1.0, grace=GRACE)
+    assert res["seconds"] is not None, f"still running {GRACE} s after SIGINT: {res}"
+    assert res["type"] == "KeyboardInterrupt", res
+    assert res["returncode"] == 0, res
