@@ -32,6 +32,28 @@ def test_cli_json_and_report(tmp_path):
     assert list((tmp_path / "rep").glob("finding_1_*.png"))
 
 
+def test_cli_saves_the_augmented_model(tmp_path):
+    """`--save` writes the final model (declared + found effects) as a greybox model file
+    that loads and predicts the record like any other kind."""
+    from cdam_core.models import load_model
+    rec = rigid_axis_record(seed=2, Fc=1.5, duration=6.0)
+    _csv(tmp_path / "r.csv", rec)
+    assert main(["residual", str(tmp_path / "r.csv"), "--model", "rigid_axis", "--map",
+                 "tau=force,q=pos", "--json", str(tmp_path / "o.json"), "--save",
+                 str(tmp_path / "m.json")]) == 0
+    js = json.loads((tmp_path / "o.json").read_text())
+    m = load_model(tmp_path / "m.json")
+    assert m.kind == "greybox" and m.input_names_ == ["force"] and m.output_names_ == ["pos"]
+    assert js["saved_model"]["kind"] == "greybox"
+    assert [e.key for e in m.effects] == ["coulomb_friction@tau"]
+    p = m.parameters()
+    assert p["coulomb_friction@tau.Fc"][0] == pytest.approx(
+        js["findings"][0]["parameters"]["Fc"], rel=1e-12)
+    U, Y = rec["tau"][:, None], rec["q"][:, None]
+    P = m.predict(U, Y, mode="k_step", k=100)
+    assert np.sqrt(np.mean((P - Y) ** 2)) < 0.05 * np.std(Y)
+
+
 def test_cli_errors(tmp_path, capsys):
     rec = rigid_axis_record(seed=2, duration=2.0)
     _csv(tmp_path / "r.csv", rec)
@@ -55,8 +77,14 @@ def test_cli_on_a_simulated_flight(tmp_path):
                          declare=["arm_coupling"])
     write_flight(tmp_path / "f.csv", ds)
     rc = main(["residual", str(tmp_path / "f.csv"), "--model", "aerial_manipulator", "--fixed",
-               "m=1.82", "--no-free-run", "--json", str(tmp_path / "o.json")])
+               "m=1.82", "--no-free-run", "--json", str(tmp_path / "o.json"), "--save",
+               str(tmp_path / "m.json")])
     assert rc == 0
+    from cdam_core.models import load_model
+    m = load_model(tmp_path / "m.json")
+    assert sorted(e.key for e in m.effects) == sorted(
+        ["arm_coupling@" + c for c in ("X", "Y", "Z", "tau_phi", "tau_theta")] + ["thrust_loss@Z"])
+    assert m.input_names_[:4] == ["T", "tau_phi", "tau_theta", "tau_psi"]
     js = json.loads((tmp_path / "o.json").read_text())
     assert js["declared_effects"] == ["arm_coupling"]
     assert [(f["effect"], f["channel"]) for f in js["findings"]] == [("thrust_loss", "Z")]

@@ -62,6 +62,8 @@ def run(args) -> int:
     js = to_json(sel)
     js["source"] = str(args.data)
     js["declared_effects"] = declared
+    if args.save:
+        js["saved_model"] = _save(args.save, sel, mapping, ds, args)
     if args.json:
         Path(args.json).write_text(json.dumps(js, indent=2))
     if args.report:
@@ -74,6 +76,25 @@ def run(args) -> int:
         for u in js["unexplained"]:
             print(f"unexplained structure on {u['channel']} at {u['frequency_hz']:.1f} Hz")
     return 0
+
+
+def _save(path, sel, mapping: dict, ds, args) -> dict:
+    """Write the final (augmented) model as a ``greybox`` model file; returns its summary."""
+    import numpy as np
+    from cdam_core.models.file import save_model
+    from cdam_core.models.greybox.augmented import GreyBox
+    final = sel.final
+    m = final.model
+    extra = [e.column for e in final.effects if getattr(e, "column", "")]
+    filt = final.signals.get("filter")
+    g = GreyBox.from_fit(final, dt=float(np.mean(np.diff(ds.t))),
+                         cutoff_hz=None if filt is None else filt.cutoff_hz,
+                         filter_order=4 if filt is None else filt.order, extra_columns=extra)
+    digest = save_model(path, g, inputs=[mapping[i] for i in m.inputs] + extra,
+                        outputs=[mapping[p] for p in m.positions],
+                        meta={"source": Path(args.data).name, "command": "cdam residual",
+                              "effects": [e.key for e in final.effects]})
+    return {"path": str(path), "kind": "greybox", "sha256": digest}
 
 
 def register(subparsers) -> None:
@@ -90,6 +111,8 @@ def register(subparsers) -> None:
     p.add_argument("--outputs", help="comma-separated output columns")
     p.add_argument("--map", help="model signal names to columns, e.g. tau=force,q=qm")
     p.add_argument("--json", help="write the JSON result here")
+    p.add_argument("--save", help="write the final model (declared model + the effects found) "
+                                  "as a greybox model file here (docs/MODEL_FILE.md)")
     p.add_argument("--report", help="write a Markdown report with PNG figures into this folder")
     p.add_argument("--cutoff", type=float, default=None,
                    help="derivative filter cutoff in Hz (default: 100 for rigid_axis and "

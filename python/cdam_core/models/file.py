@@ -23,6 +23,7 @@ from pathlib import Path
 
 from cdam_core.base.jsonio import plain, write_text_atomic
 from cdam_core.models.arx import ArxModel
+from cdam_core.models.greybox.augmented import GreyBox
 from cdam_core.models.hybrid import HybridNarx
 from cdam_core.models.network import BPNetwork
 from cdam_core.models.protocol import Model
@@ -30,7 +31,8 @@ from cdam_core.models.schema import validate_document
 
 FORMAT = "cdam-model"
 VERSION = 2
-KINDS: dict[str, type] = {"bp_network": BPNetwork, "arx": ArxModel, "hybrid": HybridNarx}
+KINDS: dict[str, type] = {"bp_network": BPNetwork, "arx": ArxModel, "hybrid": HybridNarx,
+                          "greybox": GreyBox}
 MAX_FILE_BYTES = 256 * 1024 * 1024
 
 __all__ = ["save_model", "load_model", "read_model_file", "ModelFile", "FORMAT", "VERSION",

@@ -134,7 +134,7 @@ class Model(ABC):
             if mode == "one_step":
                 P[a + self.t0:b] = self._one_step(u, y)
             elif mode == "free_run":
-                P[a + self.t0:b] = self._free_run(u, y[:self.t0])
+                P[a + self.t0:b] = self._free_run_segment(u, y)
             else:
                 P[a:b] = self._k_step(u, y, k)
         return P
@@ -168,6 +168,11 @@ class Model(ABC):
     def _one_step(self, U: np.ndarray, Y: np.ndarray) -> np.ndarray:
         """Rows t0.. of one segment from measured rows (U, Y of the segment)."""
         raise NotImplementedError
+
+    def _free_run_segment(self, U: np.ndarray, Y: np.ndarray) -> np.ndarray:
+        """Free run of one segment: by default from its first t0 measured rows alone; a kind
+        driven by measured exogenous channels (the grey-box model's arm coupling) overrides it."""
+        return self._free_run(U, Y[:self.t0])
 
     def _free_run(self, U: np.ndarray, Y0: np.ndarray) -> np.ndarray:
         """Rows t0.. of one segment from its inputs and first t0 measured rows Y0."""

@@ -86,6 +86,7 @@ class Fit:
     cond: float
     columns: dict = field(default_factory=dict)   # equation -> estimated parameters in it
     weights: dict = field(default_factory=dict)   # equation -> WLS weight (missing: 1)
+    std: dict = field(default_factory=dict)       # estimated parameter -> standard deviation
 
     def wsse(self, equations=None) -> float:
         """Weighted sum of squared residuals over ``equations`` (default: all)."""
@@ -175,7 +176,7 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None)
     # on a tall matrix is 10x slower), solved on unit-norm columns so the small systems stay
     # well conditioned.
     theta = dict(model.fixed)
-    resid, conds = {}, []
+    resid, conds, std = {}, [], {}
     for comp in _components(eqs, est):
         if (sigs is not None and bsigs is not None and base.keep == keep
                 and all(bsigs.get(eq) == sigs[eq] for eq in comp)):
@@ -183,6 +184,8 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None)
                 resid[eq] = base.residuals[eq]
                 for p in base.columns.get(eq, []):
                     theta[p] = base.theta[p]
+                    if p in base.std:
+                        std[p] = base.std[p]
             continue
         ps_all = [p for p in est if any(p in eqs[eq][1] for eq in comp)]
         index = {p: j for j, p in enumerate(ps_all)}
@@ -215,14 +218,33 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None)
             sv = np.sqrt(np.maximum(np.linalg.eigvalsh(As)[::-1], 0.0))
             conds.append(float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf"))
         theta.update(zip(ps_all, map(float, th)))
+        wsse, rows = 0.0, 0
         for eq, y, X, ix in blocks:
             resid[eq] = y - np.einsum("ij,j->i", X, th[ix])
+            wsse += weights.get(eq, 1.0) ** 2 * float(resid[eq] @ resid[eq])
+            rows += y.size
+        std.update(_std(As, scale, wsse, rows, ps_all))
     if base is not None and len(conds) < len(_components(eqs, est)):
         conds.append(base.cond)
     resid = {eq: resid[eq] for eq in eqs}
     refs = {eq: _reference(model, eq, s, theta, eqs[eq][0], n, keep) for eq in eqs}
     return Fit(model, effects, theta, est, resid, refs, s, keep, max(conds) if conds else 1.0,
-               {eq: [p for p in cols if p in est] for eq, (_, cols) in eqs.items()}, weights)
+               {eq: [p for p in cols if p in est] for eq, (_, cols) in eqs.items()}, weights,
+               std)
+
+
+def _std(As: np.ndarray, scale: np.ndarray, wsse: float, rows: int, names: list) -> dict:
+    """Standard deviations sqrt(diag(s^2 (Phi'W Phi)^-1)), s^2 = weighted SSE / (rows - k),
+    the usual least-squares covariance (residuals taken as white: an optimistic figure when
+    they are not; the report states so). NaN where the parameter is not identifiable."""
+    k = len(names)
+    if k == 0 or rows <= k:
+        return {p: float("nan") for p in names}
+    s2 = wsse / (rows - k)
+    cov = np.linalg.pinv(As, hermitian=True) / np.outer(scale, scale)
+    d = np.diag(cov)
+    return {p: float(np.sqrt(s2 * d[j])) if d[j] > 0 else float("nan")
+            for j, p in enumerate(names)}
 
 
 def set_equation_weights(sig: dict, fitted: Fit) -> dict:
@@ -399,4 +421,5 @@ def apply_fit(fitted: Fit, sig: dict, trim: int | None = None) -> Fit:
         resid[eq] = (np.broadcast_to(np.asarray(y, dtype=float), (n,)) - pred)[keep]
         refs[eq] = _reference(model, eq, s, fitted.theta, y, n, keep)
     return Fit(model, fitted.effects, dict(fitted.theta), list(fitted.estimated), resid, refs, s,
-               keep, fitted.cond, dict(fitted.columns), dict(fitted.weights))
+               keep, fitted.cond, dict(fitted.columns), dict(fitted.weights),
+               dict(fitted.std))

@@ -1,0 +1,390 @@
+"""The grey-box model as a model kind: a declared model plus the effects found, fitted, saved,
+loaded and predicted like every other kind (``kind: "greybox"`` in the model file).
+
+Inputs U: the declared model's inputs (``tau`` / ``tau_m`` / the rotor commands ...) followed by
+the measured channels of its ``external_force`` effects (``extra_columns``); outputs Y: its
+positions. Sample time ``dt`` is part of the model (the effects shift and differentiate in time).
+
+Prediction integrates the equations forward (semi-implicit Euler, ``substeps`` per sample, as
+:func:`cdam_core.models.greybox.estimation.simulate`). The state at a row is the measured
+position and the backward difference of the last two measured positions, so ``t0 = 2``: one-step
+predicts row t from rows t-2, t-1 and the input at t-1; k-step integrates k samples from the
+state at t-k, all windows at once; free run integrates the whole segment from its first two rows.
+Effects whose columns need the whole record (``arm_coupling``: the arm's measured motion acting
+on the body) take them from the measured outputs in every mode, as ``cdam residual``'s free run
+does. The inertia matrix (how the accelerations enter the equations) and the number of substeps
+are fixed when the model is fitted (from the zero state), so a loaded model predicts exactly as
+the fitted one.
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from cdam_core.models.greybox.declared import DerivativeFilter
+from cdam_core.models.greybox.effects import LIBRARY, Effect
+from cdam_core.models.greybox.estimation import fit as idim_fit
+from cdam_core.models.greybox.registry import MODEL_NAMES, get_model
+from cdam_core.models.protocol import Model
+
+__all__ = ["GreyBox"]
+
+MAX_SUBSTEPS = 10000
+
+
+def _effect_to_dict(e: Effect) -> dict:
+    out = {"name": e.name}
+    for f in dataclasses.fields(e):
+        v = getattr(e, f.name)
+        out[f.name] = list(v) if isinstance(v, tuple) else v
+    return out
+
+
+def _effect_from_dict(d: dict, where: str) -> Effect:
+    if not isinstance(d, dict) or d.get("name") not in LIBRARY:
+        raise ValueError(f"{where}.name: unknown effect {d.get('name') if isinstance(d, dict) else d!r}")
+    cls = LIBRARY[d["name"]]
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    kw = {}
+    for key, value in d.items():
+        if key == "name":
+            continue
+        if key not in fields:
+            raise ValueError(f"{where}.{key}: not a field of {d['name']}")
+        default = fields[key].default
+        if isinstance(default, bool):
+            ok = isinstance(value, bool)
+        elif isinstance(default, float):
+            ok = isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value)
+            value = float(value) if ok else value
+        elif isinstance(default, tuple):
+            ok = isinstance(value, list) and all(isinstance(x, str) for x in value)
+            value = tuple(value) if ok else value
+        else:
+            ok = isinstance(value, str)
+        if not ok:
+            raise ValueError(f"{where}.{key}: wrong type {type(value).__name__}")
+        kw[key] = value
+    if "channel" not in kw:
+        raise ValueError(f"{where}.channel: missing")
+    return cls(**kw)
+
+
+class GreyBox(Model):
+    """A declared grey-box model (``rigid_axis``, ``flexible_joint``, ``quadrotor``,
+    ``aerial_manipulator``) with library effects, estimated by IDIM-LS (see the module doc)."""
+
+    kind = "greybox"
+
+    def __init__(self, declared: str = "rigid_axis", dt: float | None = None, effects=(),
+                 fixed: dict | None = None, cutoff_hz: float | None = None, filter_order: int = 4,
+                 extra_columns=()):
+        self.declared = declared
+        self.dt = dt
+        self.effects = tuple(effects)
+        self.fixed = dict(fixed or {})
+        self.cutoff_hz = cutoff_hz
+        self.filter_order = filter_order
+        self.extra_columns = tuple(extra_columns)
+        self.n_outputs_ = None
+
+    # -- structure -----------------------------------------------------------------------------
+    @property
+    def t0(self) -> int:
+        return 2
+
+    def _structure(self):
+        """Check the settings; returns the declared model."""
+        m = get_model(self.declared, self.fixed)
+        if self.dt is None or not np.isfinite(self.dt) or self.dt <= 0:
+            raise ValueError(f"dt: the sample time must be a positive number, got {self.dt!r}")
+        ext = set(self.extra_columns)
+        channels = set(m.equation_names) | set(m.inputs) | set(getattr(m, "shared_delays", {}))
+        for j, e in enumerate(self.effects):
+            if not isinstance(e, Effect):
+                raise ValueError(f"effects[{j}]: not an Effect")
+            if e.channel not in channels or not e.applies_to(m):
+                raise ValueError(f"effects[{j}]: {e.key} does not apply to {m.name}")
+            if getattr(e, "column", None) and e.column not in ext:
+                raise ValueError(f"effects[{j}]: column {e.column!r} not in extra_columns")
+        return m
+
+    def _signals(self, m, U, Y):
+        ni = len(m.inputs)
+        raw = {name: U[:, i] for i, name in enumerate(m.inputs)}
+        raw.update({p: Y[:, j] for j, p in enumerate(m.positions)})
+        extra = {c: U[:, ni + j] for j, c in enumerate(self.extra_columns)}
+        return raw, extra
+
+    def _filter(self, m) -> DerivativeFilter:
+        return DerivativeFilter(m.default_cutoff_hz if self.cutoff_hz is None else self.cutoff_hz,
+                                int(self.filter_order))
+
+    # -- fit -----------------------------------------------------------------------------------
+    def _fit(self, U, Y):
+        m = self._structure()
+        if U.shape[1] != len(m.inputs) + len(self.extra_columns):
+            raise ValueError(f"U: {self.declared} with extra columns {list(self.extra_columns)} "
+                             f"takes {len(m.inputs) + len(self.extra_columns)} columns "
+                             f"({', '.join(m.inputs + self.extra_columns)}), got {U.shape[1]}")
+        if Y.shape[1] != len(m.positions):
+            raise ValueError(f"Y: {self.declared} has {len(m.positions)} outputs "
+                             f"({', '.join(m.positions)}), got {Y.shape[1]}")
+        t = np.arange(U.shape[0]) * float(self.dt)
+        raw, extra = self._signals(m, U, Y)
+        sig = m.prepare(t, raw, self._filter(m), extra or None)
+        f = idim_fit(m, sig, self.effects)
+        self._set(m, f.theta, f.std, f.estimated, U.shape[1], Y.shape[1])
+
+    @classmethod
+    def from_fit(cls, fitted, dt: float, cutoff_hz: float | None = None, filter_order: int = 4,
+                 extra_columns=()) -> "GreyBox":
+        """The model of an IDIM fit (e.g. ``cdam residual``'s final, augmented fit)."""
+        m = fitted.model
+        g = cls(m.name, dt, fitted.effects, m.fixed, cutoff_hz, filter_order, extra_columns)
+        m = g._structure()
+        g._set(m, fitted.theta, fitted.std, fitted.estimated,
+               len(m.inputs) + len(g.extra_columns), len(m.positions))
+        return g
+
+    def _set(self, m, theta, std, estimated, n_in, n_out, substeps=None):
+        self.theta_ = {k: float(v) for k, v in theta.items()}
+        self.std_ = {k: (None if v is None or not np.isfinite(v) else float(v))
+                     for k, v in std.items()}
+        self.estimated_ = list(estimated)
+        self.n_inputs_, self.n_outputs_ = int(n_in), int(n_out)
+        self._m = m
+        self._inertia = self._inertia_matrix()
+        self.substeps_ = int(substeps) if substeps is not None else self._choose_substeps()
+
+    # -- equations on a batch of states ---------------------------------------------------------
+    def _state(self, x, v, a, u: dict, ex: dict, k, t) -> dict:
+        m = self._m
+        s = {"t": t, "extra": ex, "k": k, "dt": float(self.dt)}
+        s.update(u)
+        for j, p in enumerate(m.positions):
+            s[p], s[p + "_d"], s[p + "_dd"] = x[:, j], v[:, j], a[:, j]
+        return m.augment(s)
+
+    def _errors(self, s: dict, pre: dict, effects=None) -> np.ndarray:
+        """Equation errors (equations, W) of the states in ``s``."""
+        m, theta = self._m, self.theta_
+        effects = self.effects if effects is None else effects
+        for e in effects:
+            s = e.transform_state(s, m)
+        eqs = {k: (y, dict(c)) for k, (y, c) in m.equations(s).items()}
+        for e in effects:
+            if e.key in pre:   # whole-record columns, from the measured signals
+                cols = {e.channel: {n: c[s["k"]] for n, c in pre[e.key].items()}}
+            else:
+                cols = e.regressors(s, m)
+            for eq, c in cols.items():
+                eqs[eq][1].update(c)
+        W = s[m.positions[0]].shape[0]
+        out = np.empty((len(eqs), W))
+        for i, (y, cols) in enumerate(eqs.values()):
+            r = np.broadcast_to(np.asarray(y, dtype=float), (W,)).copy()
+            for p, c in cols.items():
+                r -= theta[p] * np.asarray(c, dtype=float)
+            out[i] = r
+        return out
+
+    def _zero_state(self, W=1):
+        m = self._m
+        n = len(m.positions)
+        z = np.zeros((W, n))
+        u = {name: np.zeros(W) for name in m.inputs}
+        ex = {c: np.zeros(W) for c in self.extra_columns}
+        return z, u, ex
+
+    def _inertia_matrix(self) -> np.ndarray:
+        """How the accelerations enter the equation errors, at the zero state (e = b - A a)."""
+        m = self._m
+        n = len(m.positions)
+        z, u, ex = self._zero_state(n + 1)
+        a = np.vstack([np.zeros(n), np.eye(n)])
+        k = np.zeros(n + 1, dtype=int)
+        pre = self._zero_pre(n + 1)
+        e = self._errors(self._state(z, z, a, u, ex, k, np.zeros(n + 1)), pre)
+        A = e[:, :1] - e[:, 1:]
+        if A.shape[0] != n or np.linalg.cond(A) > 1e12:
+            raise ValueError("theta: the estimated inertia matrix is singular; cannot simulate")
+        return np.linalg.inv(A)
+
+    def _zero_pre(self, W):
+        return {e.key: {n: np.zeros(W) for n in self._pre_names(e)} for e in self.effects
+                if hasattr(e, "columns")}
+
+    def _pre_names(self, e):
+        return [p for p in self.theta_ if p.startswith(e.key + ".")]
+
+    def _accel(self, x, v, u, ex, k, t, pre, effects=None):
+        zero = np.zeros_like(x)
+        e = self._errors(self._state(x, v, zero, u, ex, k, t), pre, effects)
+        return (self._inertia @ e).T
+
+    def _choose_substeps(self) -> int:
+        """h |lambda|max <= 0.5 for the base model linearised at the zero state."""
+        n = len(self._m.positions)
+        z, u, ex = self._zero_state(2 * n + 1)
+        x, v = z.copy(), z.copy()
+        h = 1e-6
+        for j in range(2 * n):
+            (x if j < n else v)[j + 1, j % n] += h
+        acc = self._accel(x, v, u, ex, np.zeros(2 * n + 1, dtype=int), np.zeros(2 * n + 1),
+                          self._zero_pre(2 * n + 1), effects=())
+        J = np.zeros((2 * n, 2 * n))
+        J[:n, n:] = np.eye(n)
+        J[n:, :] = ((acc[1:] - acc[0]) / h).T
+        lam = float(np.max(np.abs(np.linalg.eigvals(J))))
+        steps = max(1, int(np.ceil(float(self.dt) * lam / 0.5)))
+        if steps > MAX_SUBSTEPS:
+            raise ValueError(f"theta: the model's fastest mode ({lam:.3g} 1/s) needs {steps} "
+                             f"substeps per sample (limit {MAX_SUBSTEPS}); not simulated")
+        return steps
+
+    # -- prediction ----------------------------------------------------------------------------
+    def _inputs(self, U):
+        """Inputs over one segment after the effects' input transforms (delays)."""
+        m = self._m
+        n = U.shape[0]
+        s = {"t": np.arange(n) * float(self.dt)}
+        s.update({name: U[:, i].astype(float) for i, name in enumerate(m.inputs)})
+        for e in self.effects:
+            s = e.transform_inputs(s, m)
+        ni = len(m.inputs)
+        ex = {c: U[:, ni + j].astype(float) for j, c in enumerate(self.extra_columns)}
+        return {name: s[name] for name in m.inputs}, ex
+
+    def _precomputed(self, U, Y) -> dict:
+        """Whole-record effect columns from the measured segment (arm_coupling)."""
+        wanted = [e for e in self.effects if hasattr(e, "columns")]
+        if not wanted:
+            return {}
+        m = self._m
+        if Y.shape[0] < 20:
+            raise ValueError(f"Y: {wanted[0].key} needs at least 20 measured rows per segment")
+        raw, extra = self._signals(m, U, Y)
+        sig = m.prepare(np.arange(U.shape[0]) * float(self.dt), raw, self._filter(m), extra or None)
+        from cdam_core.models.greybox.estimation import apply_effects
+        s = apply_effects(m, sig, self.effects)
+        return {e.key: e.columns(s) for e in wanted}
+
+    def _rollout(self, U, Y, starts: np.ndarray, steps: int, path: bool) -> np.ndarray:
+        """Integrate ``steps`` samples from the measured state at each row of ``starts``;
+        returns the final positions (W, m), or every step's (steps, W, m) with ``path``."""
+        u_all, ex_all = self._inputs(U)
+        pre_all = self._precomputed(U, Y)
+        dt = float(self.dt)
+        x = Y[starts].astype(float)
+        v = (Y[starts] - Y[starts - 1]) / dt
+        h = dt / self.substeps_
+        out = np.empty((steps,) + x.shape) if path else None
+        for j in range(steps):
+            k = starts + j
+            u = {name: a[k] for name, a in u_all.items()}
+            ex = {c: a[k] for c, a in ex_all.items()}
+            t = k * dt
+            for _ in range(self.substeps_):
+                v = v + h * self._accel(x, v, u, ex, k, t, pre_all)
+                x = x + h * v
+            if not np.all(np.isfinite(x)) or np.max(np.abs(x), initial=0.0) > 1e9:
+                raise ValueError(f"prediction diverged at row {int(k[0]) + 1} of the segment")
+            if path:
+                out[j] = x
+        return out if path else x
+
+    def _one_step(self, U, Y):
+        return self._k_step(U, Y, 1)[self.t0:]
+
+    def _k_step(self, U, Y, k):
+        P = Y.astype(float).copy()
+        first = self.t0 + k - 1
+        if Y.shape[0] > first:
+            targets = np.arange(first, Y.shape[0])
+            P[targets] = self._rollout(U, Y, targets - k, k, path=False)
+        return P
+
+    def _free_run_segment(self, U, Y):
+        n = Y.shape[0]
+        path = self._rollout(U, Y, np.array([self.t0 - 1]), n - self.t0, path=True)
+        return path[:, 0, :]
+
+    def parameters(self) -> dict:
+        self._check_fitted()
+        return {p: (v, self.std_.get(p)) for p, v in self.theta_.items()}
+
+    # -- file ----------------------------------------------------------------------------------
+    def to_dict(self) -> dict:
+        self._check_fitted()
+        names = list(self.theta_)
+        return {"declared": self.declared, "dt": float(self.dt),
+                "n_inputs": self.n_inputs_, "n_outputs": self.n_outputs_,
+                "fixed": dict(self.fixed), "extra_columns": list(self.extra_columns),
+                "filter": {"cutoff_hz": float(self._filter(self._m).cutoff_hz),
+                           "order": int(self.filter_order)},
+                "effects": [_effect_to_dict(e) for e in self.effects],
+                "parameters": {"names": names, "values": [self.theta_[p] for p in names],
+                               "std": [self.std_.get(p) for p in names],
+                               "estimated": list(self.estimated_)},
+                "substeps": int(self.substeps_)}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "GreyBox":
+        if d["declared"] not in MODEL_NAMES:
+            raise ValueError(f"model.declared: unknown model {d['declared']!r}")
+        effects = [_effect_from_dict(e, f"model.effects[{j}]") for j, e in enumerate(d["effects"])]
+        g = cls(d["declared"], float(d["dt"]), effects, d["fixed"], d["filter"]["cutoff_hz"],
+                int(d["filter"]["order"]), d["extra_columns"])
+        try:
+            m = g._structure()
+        except ValueError as exc:
+            raise ValueError(f"model.{exc}") from None
+        par = d["parameters"]
+        names, values, std = par["names"], par["values"], par["std"]
+        if not (len(names) == len(values) == len(std)):
+            raise ValueError("model.parameters: names, values and std differ in length")
+        if len(set(names)) != len(names):
+            raise ValueError("model.parameters.names: repeated name")
+        expected = _parameter_names(m, effects, g)
+        if set(names) != expected:
+            extra = sorted(set(names) - expected)
+            missing = sorted(expected - set(names))
+            raise ValueError(f"model.parameters.names: do not match the model and its effects "
+                             f"(unexpected {extra}, missing {missing})")
+        for j, v in enumerate(values):
+            if not np.isfinite(v):
+                raise ValueError(f"model.parameters.values[{j}]: not a finite number")
+        if d["n_inputs"] != len(m.inputs) + len(g.extra_columns) or d["n_outputs"] != len(m.positions):
+            raise ValueError("model.n_inputs: does not match the declared model and extra columns")
+        estimated = par["estimated"]
+        if not set(estimated) <= set(names):
+            raise ValueError("model.parameters.estimated: names a parameter not in names")
+        g._set(m, dict(zip(names, values)), dict(zip(names, std)), estimated,
+               d["n_inputs"], d["n_outputs"], substeps=d["substeps"])
+        return g
+
+
+def _parameter_names(m, effects, g: GreyBox) -> set:
+    """Every parameter the model with ``effects`` has (its equations' columns), from a tiny
+    synthetic record: what a file must hold, no more and no less."""
+    from cdam_core.models.greybox.estimation import design
+    n = 64
+    t = np.arange(n) * float(g.dt)
+    raw = {name: np.zeros(n) for name in m.inputs}
+    raw.update({p: np.zeros(n) for p in m.positions})
+    sig = {"t": t, "dt": float(g.dt), "extra": {c: np.zeros(n) for c in g.extra_columns}}
+    sig.update(raw)
+    for p in m.positions:
+        sig[p + "_raw"] = raw[p]
+        sig[p + "_d"] = np.zeros(n)
+        sig[p + "_dd"] = np.zeros(n)
+        for suffix in ("_dj", "_ddj"):
+            sig[p + suffix] = np.zeros(n)
+    sig = m.augment(sig)
+    _, eqs = design(m, sig, effects)
+    names = set(m.fixed)
+    for _, cols in eqs.values():
+        names |= set(cols)
+    return names
