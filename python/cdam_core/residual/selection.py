@@ -237,7 +237,8 @@ def select(model, sig: dict, candidates, alpha: float = 0.01, max_steps: int | N
     candidates = [c for c in candidates if c.key not in dkeys]
     sig_fr = validation if validation is not None else sig
     store: dict = {}
-    sig.pop("_eq_weights", None)
+    if hasattr(sig, "weights"):
+        sig.weights = {}
     declared = fit(model, sig, (), trim)
     for e in declared_effects:   # searched parameters of declared effects are searched once
         e2, declared = _fit_with(model, sig, declared.effects, e, trim)

@@ -59,6 +59,23 @@ class DerivativeFilter:
         return xf, xd, np.gradient(xd, dt)
 
 
+class Signals(dict):
+    """The prepared signals of one record: named arrays (``t``, ``tau``, ``q``, ``q_d``,
+    ``q_dd`` ...) as a dict, plus typed per-record state the estimators keep beside them."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.weights: dict[str, float] = {}    # IDIM-WLS equation weights (empty: unweighted)
+        self.cache: dict[str, dict] = {}       # per-record column caches ("lowpass", "arm")
+        self.signatures: dict | None = None    # equation -> content keys of its columns
+
+    def copy(self) -> "Signals":
+        """A shallow copy sharing the weights and caches (effects transform copies)."""
+        out = Signals(self)
+        out.weights, out.cache, out.signatures = self.weights, self.cache, self.signatures
+        return out
+
+
 class GreyBoxModel:
     """Base class. Subclasses set the names below and implement ``equations``."""
 
@@ -90,7 +107,7 @@ class GreyBoxModel:
     # -- signals ---------------------------------------------------------------------------
     def prepare(self, t, raw: dict, filt: DerivativeFilter | None = None,
                 extra: dict | None = None) -> dict:
-        """Check the raw signals and add smoothed derivatives.
+        """Check the raw signals and add smoothed derivatives (a :class:`Signals`).
 
         ``raw`` maps each name in ``self.signals`` to an array; ``extra`` holds measured channels
         the model leaves out (candidates for ``external_force``). Returns a dict of arrays with
@@ -105,7 +122,7 @@ class GreyBoxModel:
         if missing:
             raise ValueError(f"raw: {self.name} needs signal(s) {', '.join(missing)}")
         dt = float(np.mean(np.diff(t)))
-        sig: dict = {"t": t, "dt": dt, "filter": filt}
+        sig = Signals(t=t, dt=dt, filter=filt)
         for s in self.inputs:
             sig[s] = as_signal(raw[s], s, n)
         for p in self.positions:

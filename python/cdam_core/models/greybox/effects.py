@@ -179,7 +179,7 @@ class Backlash(Effect):
         key = model.cables[self.channel][1]
         h = 0.5 * self.width
         d = s[key]
-        s = dict(s)
+        s = s.copy()
         s[key] = np.sign(d) * np.maximum(np.abs(d) - h, 0.0)
         return s
 
@@ -252,7 +252,7 @@ class ActuatorDelay(Effect):
     def transform_inputs(self, s, model):
         if self.delay <= 0:
             return s
-        s = dict(s)
+        s = s.copy()
         t = s["t"]
         for c in self.commands:
             s[c] = np.interp(t - self.delay, t, s[c])
@@ -388,7 +388,9 @@ class ArmCoupling(Effect):
                 raise ValueError("arm_coupling: needs the whole record (precomputed columns)")
             k = s["k"]
             return {self.channel: {n: float(c[k]) for n, c in pre.items()}}
-        cache = s.get("_arm_cache")   # positions are never changed by effects: cache per record
+        # positions are never changed by effects: cache the columns per prepared record
+        cache = getattr(s, "cache", None)
+        cache = None if cache is None else cache.setdefault("arm", {})
         if cache is None:
             return {self.channel: self.columns(s)}
         if self.key not in cache:

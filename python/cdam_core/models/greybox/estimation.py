@@ -3,7 +3,7 @@
 Estimation: stack every equation's rows ``y = Phi theta`` over the record (the first and last
 ``trim`` samples, where the zero-phase filter and the differences have edge effects, are left
 out), move fixed parameters to the left side, solve with ``numpy.linalg.lstsq``. Weighted
-(IDIM-WLS, Gautier): when the prepared signals hold ``_eq_weights`` (``{equation: w}``, set by
+(IDIM-WLS, Gautier): when the prepared signals hold ``weights`` (``{equation: w}``, set by
 :func:`set_equation_weights` as 1 / the RMS of each equation's ordinary least-squares
 residual), each equation's rows are multiplied by its weight, so a noisy equation (the link
 equations of the flight model, whose body accelerations are twice-differentiated position
@@ -22,7 +22,7 @@ from cdam_core.base.signals import as_signal, as_time
 
 
 def apply_effects(model, sig: dict, effects) -> dict:
-    s = dict(sig)
+    s = sig.copy()
     for e in effects:
         s = e.transform_inputs(s, model)
     for e in effects:
@@ -41,7 +41,7 @@ def design(model, sig: dict, effects=()) -> tuple[dict, dict]:
             eqs[eq][1].update(cols)
     if getattr(model, "parallel_filter", False) and "filter" in s:
         n = np.asarray(s["t"]).size
-        cache = sig.setdefault("_lowpass_cache", {})
+        cache = sig.cache.setdefault("lowpass", {}) if hasattr(sig, "cache") else {}
         out, sigs = {}, {}
         for eq, (y, cols) in eqs.items():
             f = model.equation_filter(eq, s)
@@ -60,7 +60,8 @@ def design(model, sig: dict, effects=()) -> tuple[dict, dict]:
             out[eq] = (got[0], dict(zip(names[1:], got[1:])))
             sigs[eq] = tuple(keys)
         eqs = out
-        s["_signatures"] = sigs
+        if hasattr(s, "signatures"):
+            s.signatures = sigs
     return s, eqs
 
 
@@ -166,11 +167,11 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None)
     for _, cols in eqs.values():
         names += [p for p in cols if p not in names]
     est = [p for p in names if p not in model.fixed]
-    sigs = s.get("_signatures")
-    weights = dict(sig.get("_eq_weights") or {})
+    sigs = getattr(s, "signatures", None)
+    weights = dict(getattr(sig, "weights", None) or {})
     if base is not None and base.weights != weights:
         base = None
-    bsigs = base.signals.get("_signatures") if base is not None else None
+    bsigs = getattr(base.signals, "signatures", None) if base is not None else None
     # Normal equations per block, assembled equation by equation (each equation holds only
     # its own columns), formed with einsum (single-threaded: on a busy machine a threaded BLAS
     # on a tall matrix is 10x slower), solved on unit-norm columns so the small systems stay
@@ -260,7 +261,9 @@ def set_equation_weights(sig: dict, fitted: Fit) -> dict:
     for eq in getattr(fitted.model, "eiv_equations", ()):
         if eq in w:
             w[eq] *= float(getattr(fitted.model, "eiv_weight", 1.0))
-    sig["_eq_weights"] = w
+    if not hasattr(sig, "weights"):
+        raise ValueError("sig: expected prepared signals (a Signals from model.prepare)")
+    sig.weights = w
     return w
 
 

@@ -130,7 +130,6 @@ class Quadrotor(GreyBoxModel):
             for p in QUAD_POSITIONS:
                 _, s[p + "_dj"], s[p + "_ddj"] = bd.apply(s[p + "_raw"], s["dt"])
         s["filter_joint"] = jf
-        s["_arm_cache"] = {}
         return self.augment(s)
 
     def joint_filter(self, filt: DerivativeFilter) -> DerivativeFilter:
