@@ -13,6 +13,7 @@ COMMANDS = [
     "simulate",
     "identify",
     "residual",
+    "evaluate",
     "export_firmware",
     "firmware",
     "can_log",

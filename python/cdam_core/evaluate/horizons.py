@@ -1,0 +1,96 @@
+"""Multi-step scores of a saved model of any kind beside the naive (persistence) predictor.
+
+For each horizon h the model predicts every sample from the measured outputs h samples earlier
+(``predict(mode="k_step", k=h)``; h = 1 is one-step) over records laid end to end as segments,
+so no prediction crosses a seam. The model and the naive predictor y(t) = y(t - h) are scored
+on the same rows: in each segment, those from ``max(t0, 1) + h - 1`` on. The free run starts
+from each segment's first ``t0`` rows (the naive free run holds the last of them).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from cdam_core.base.metrics import output_metrics
+from cdam_core.models.protocol import Model, segment_bounds
+
+__all__ = ["HorizonScores", "score_horizons", "default_horizons"]
+
+
+def default_horizons(max_h: int) -> list[int]:
+    """Every horizon 1..max_h up to 50 (the nano-drone benchmark's protocol); above that about
+    30 log-spaced horizons including 1 and max_h."""
+    max_h = int(max_h)
+    if max_h < 1:
+        raise ValueError(f"horizon: must be >= 1, got {max_h}")
+    if max_h <= 50:
+        return list(range(1, max_h + 1))
+    return sorted({int(round(x)) for x in np.geomspace(1, max_h, 30)} | {1, max_h})
+
+
+@dataclass
+class HorizonScores:
+    """RMSE per output at each horizon, one-step and free-run metrics, per predictor."""
+
+    outputs: list[str]
+    horizons: list[int]
+    rmse: dict[str, np.ndarray] = field(default_factory=dict)   # predictor -> (H, m)
+    mae: dict[str, np.ndarray] = field(default_factory=dict)    # predictor -> (H, m)
+    free_run: dict[str, dict] = field(default_factory=dict)     # predictor -> output metrics
+    rows: list[int] = field(default_factory=list)               # scored rows per horizon
+
+    def to_json(self) -> dict:
+        return {"outputs": self.outputs, "horizons": self.horizons, "rows": self.rows,
+                "rmse": {k: {o: v[:, j].tolist() for j, o in enumerate(self.outputs)}
+                         for k, v in self.rmse.items()},
+                "mae": {k: {o: v[:, j].tolist() for j, o in enumerate(self.outputs)}
+                        for k, v in self.mae.items()},
+                "free_run": self.free_run}
+
+
+def score_horizons(model: Model, U, Y, outputs, horizons, segments=None,
+                   free_run: bool = True, progress=None) -> HorizonScores:
+    """Score ``model`` and the naive predictor at every horizon (see the module doc)."""
+    Y = np.asarray(Y, dtype=float)
+    bounds = segment_bounds(segments, len(Y))
+    start = max(model.t0, 1)
+    out = HorizonScores(list(outputs), [int(h) for h in horizons])
+    if not out.horizons:
+        raise ValueError("horizons: empty")
+    rm, rn, am, an = [], [], [], []
+    for i, h in enumerate(out.horizons):
+        if h < 1:
+            raise ValueError(f"horizons[{i}]: must be >= 1, got {h}")
+        keep = np.zeros(len(Y), bool)
+        for a, b in bounds:
+            keep[a + start + h - 1:b] = True
+        if not keep.any():
+            raise ValueError(f"horizons: {h} samples is longer than every record")
+        P = model.predict(U, Y, mode="one_step" if h == 1 else "k_step", k=h, segments=segments)
+        if not np.all(np.isfinite(P[keep])):
+            raise ValueError(f"model: the {h}-step prediction diverged (NaN or Inf)")
+        idx = np.flatnonzero(keep)
+        E, N = P[idx] - Y[idx], Y[idx - h] - Y[idx]
+        rm.append(np.sqrt(np.mean(E ** 2, axis=0)))
+        rn.append(np.sqrt(np.mean(N ** 2, axis=0)))
+        am.append(np.mean(np.abs(E), axis=0))
+        an.append(np.mean(np.abs(N), axis=0))
+        out.rows.append(int(idx.size))
+        if progress is not None:
+            progress(i + 1, len(out.horizons))
+    out.rmse = {"model": np.array(rm), "naive": np.array(rn)}
+    out.mae = {"model": np.array(am), "naive": np.array(an)}
+    if free_run and model.dynamic:
+        P = model.predict(U, Y, mode="free_run", segments=segments)
+        keep = np.zeros(len(Y), bool)
+        hold = np.empty_like(Y)
+        for a, b in bounds:
+            keep[a + start:b] = True
+            hold[a:b] = Y[a + start - 1]
+        if np.all(np.isfinite(P[keep])):
+            out.free_run["model"] = output_metrics(Y[keep], P[keep], outputs)
+        else:
+            out.free_run["model"] = {"status": "unavailable", "reason": "the free run diverged"}
+        out.free_run["naive"] = output_metrics(Y[keep], hold[keep], outputs)
+    return out
