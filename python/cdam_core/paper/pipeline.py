@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cdam_core.base.folders import FolderError, writable_folder
 from cdam_core.base.jsonio import plain
 
 from cdam_core.report.paper import figures
@@ -39,16 +40,10 @@ RECORD_FILES = {"exp_i": "flight_i.csv", "exp_ii": "flight_ii.csv",
 
 def check_out_dir(out) -> Path:
     """Create ``out`` if needed and check it is a writable folder (ValueError otherwise)."""
-    d = Path(out)
-    if d.exists() and not d.is_dir():
-        raise ValueError(f"out: {d} exists and is not a folder")
     try:
-        d.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise ValueError(f"out: cannot create {d}: {exc.strerror or exc}") from None
-    if not os.access(d, os.W_OK | os.X_OK):
-        raise ValueError(f"out: {d} is not writable")
-    return d
+        return writable_folder(out, create=True, what="out")
+    except FolderError as exc:
+        raise ValueError(str(exc)) from None
 
 
 def _bar(total, enabled):
