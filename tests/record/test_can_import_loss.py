@@ -77,7 +77,7 @@ def _check_theta(rec, meta, truth, m, keep=None):
     tr = truth[m]
     t, th = (tr["t"], tr["theta"]) if keep is None else (tr["t"][keep], tr["theta"][keep])
     tabs = rec["t"] + meta["t0"]
-    for a, b in meta["segments"]:
+    for a, b in meta["gapless_rows"]:
         exp = np.interp(tabs[a:b], t, th)
         got = rec[f"theta_m{m}"][a:b]
         off = exp[0] - got[0]
@@ -162,7 +162,7 @@ def test_a_gap_stays_a_gap(tmp_path, capsys):
     assert not inside.any(), "grid samples fabricated inside the gap"
     assert 0.3 * RATE - 2 <= meta["gap_samples"] <= 0.3 * RATE + 2
     assert f"gap samples left out: {meta['gap_samples']}" in out
-    assert len(meta["segments"]) == 2
+    assert len(meta["gapless_rows"]) == 2
     keep = np.ones(N, bool)
     keep[a:b] = False
     _check_theta(rec, meta, truth, 1, keep=keep)

@@ -16,6 +16,7 @@ EXIT_CODES = """exit codes:
   1    done, but the result is incomplete (import-can: data lost, see the summary)
   2    usage error or bad input; nothing written
   3    I/O error (a file cannot be read, or an output cannot be written); nothing written
+  4    internal error (a bug: please report it)
   130  interrupted (Ctrl-C)
 Every failure is one line on stderr: 'cdam COMMAND: error: ...'."""
 

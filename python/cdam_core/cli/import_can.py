@@ -93,7 +93,7 @@ def run(args) -> int:
                 print(f"excluded frames: {joint}: {v['count']} {kind.replace('_', ' ')} "
                       f"(timestamps {times}{', ...' if v['count'] > 5 else ''})")
     gaps = {k: len(v) for k, v in m["gaps"].items()}
-    print(f"{len(ds)} samples at {args.rate:g} Hz in {len(m['segments'])} segment(s), "
+    print(f"{len(ds)} samples at {args.rate:g} Hz in {len(m['gapless_rows'])} segment(s), "
           f"{ds.t[-1]:.3f} s; gaps > {args.gap:g} ms: {gaps}, gap samples left out: "
           f"{m['gap_samples']} -> {args.output}")
     lost = skipped + nonfinite + n_excl + m["gap_samples"]

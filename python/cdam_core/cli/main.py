@@ -77,6 +77,11 @@ def main(argv: list[str] | None = None) -> int:
         msg = " ".join(str(msg).split())          # one line
         print(f"cdam {args.command}: error: {msg}", file=sys.stderr)
         return code
+    except Exception as exc:  # noqa: BLE001 - a bug; still one line, no traceback
+        msg = " ".join(f"{type(exc).__name__}: {exc}".split())
+        print(f"cdam {args.command}: error: internal error ({msg}); please report it",
+              file=sys.stderr)
+        return 4
 
 
 if __name__ == "__main__":

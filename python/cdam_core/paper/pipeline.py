@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from cdam_core.base.folders import FolderError, writable_folder
-from cdam_core.base.jsonio import plain
+from cdam_core.base.jsonio import atomic_target, plain, write_text_atomic
 
 from cdam_core.report.paper import figures
 from cdam_core.evaluate.baselines import persistence
@@ -140,7 +140,8 @@ def run_paper(config: PaperConfig | None = None, out="paper_out", *, progress: b
     for key, fname in RECORD_FILES.items():
         write_flight(d / fname, records[key])
         files["records"] += [fname, fname.replace(".csv", ".json")]
-    np.savez_compressed(d / "predictions.npz", **preds)
+    with atomic_target(d / "predictions.npz") as tmp:
+        np.savez_compressed(tmp, **preds)
     files["predictions"] = "predictions.npz"
     files.update(_figures(d, records, data, sections, preds, best_seeds, cfg.smoothing))
     tables = {label: paper_tables(sec) for label, sec in sections.items()}
@@ -176,7 +177,7 @@ def run_paper(config: PaperConfig | None = None, out="paper_out", *, progress: b
     lines = index_lines(result)
     md, page = write_index(d, lines, result["title"])
     files["index"] = [md.name, page.name, "results.json"]
-    (d / "results.json").write_text(json.dumps(plain(result), indent=1), encoding="utf-8")
+    write_text_atomic(d / "results.json", json.dumps(plain(result), indent=1))
     bar.update()
     bar.close()
     return result

@@ -168,7 +168,7 @@ class C610Recorder(can.Listener):
         ``i_J`` (A) and ``tau_J`` (N m); linear interpolation between frames at most
         ``gap_threshold`` s apart. A longer feedback gap stays a gap: no grid sample falls in
         it, ``t`` jumps over it (grid times stay on one k / rate lattice) and ``meta`` lists
-        the row ranges without a gap (``segments``), the gaps per joint (``gaps``) and the grid
+        the row ranges without a gap (``gapless_rows``), the gaps per joint (``gaps``) and the grid
         samples left out (``gap_samples``). A frame with a gap on both sides has nothing to
         interpolate with and is excluded (``excluded``, with the out-of-order ones). Across a gap
         the rotor turns are estimated from the speeds at its ends, so ``theta`` of a later
@@ -223,8 +223,8 @@ class C610Recorder(can.Listener):
             "gaps": {k: [{**g, "start": g["start"] - t0, "end": g["end"] - t0} for g in v]
                      for k, v in gaps.items()},
             "gap_threshold": float(gap_threshold),
-            "segments": [list(rw) for rw in rows],
-            "segments_note": "row ranges without a feedback gap; across a gap theta may be off "
+            "gapless_rows": [list(rw) for rw in rows],
+            "gapless_rows_note": "row ranges without a feedback gap; across a gap theta may be off "
                              "by whole rotor turns (2 pi / gear_ratio rad)",
             "gap_samples": full - int(grid.size),
             "excluded": excluded,
