@@ -123,22 +123,22 @@ def test_bad_invocation_is_one_line_and_touches_no_input(d, name, argv, code, te
 
 
 def test_interrupt_is_exit_130_one_line(d):
-    """Ctrl-C during a command: exit 130, one line, no traceback."""
+    """Ctrl-C during a long identification: exit 130, one line, no traceback, nothing written."""
     import signal
     import time
-    p = subprocess.Popen([sys.executable, "-m", "cdam_core.cli.main", "simulate", "-o",
-                          str(d / "long.csv"), "--duration", "600"],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                         env=os.environ.copy())
-    try:
-        time.sleep(4.0)
+    argv = ["identify", str(d / "data.csv"), "--algo", "iboa", "--seeds", "1", "--iterations",
+            "1000000", "--quiet", "--json", str(d / "r.json")]
+    with subprocess.Popen([sys.executable, "-m", "cdam_core.cli.main", *argv],
+                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                          env=os.environ.copy()) as p:
+        time.sleep(6.0)                                  # past the imports, inside the search
         p.send_signal(signal.SIGINT)
-        out, err = p.communicate(timeout=60)
-    finally:
-        if p.poll() is None:
+        try:
+            out, err = p.communicate(timeout=60)
+        except subprocess.TimeoutExpired:
             p.kill()
-            p.wait()
+            raise
     assert "Traceback" not in out + err, err
     assert p.returncode == 130, err
-    assert err.strip().splitlines() == ["cdam simulate: error: interrupted"]
-    assert not (d / "long.csv").exists()
+    assert err.strip().splitlines() == ["cdam identify: error: interrupted"]
+    assert not (d / "r.json").exists()
