@@ -180,10 +180,10 @@ def test_bad_arguments_give_clear_errors(tmp_path, capsys):
     assert "--seeds" in capsys.readouterr().err
     blocker = tmp_path / "file.txt"
     blocker.write_text("x")
-    assert main(["paper", "--out", str(blocker)] + TINY) == 2
+    assert main(["paper", "--out", str(blocker)] + TINY) == 3   # I/O error (EXIT_CODES)
     err = capsys.readouterr().err
     assert "--out" in err and "not a folder" in err
-    assert main(["paper", "--out", str(blocker / "sub")] + TINY) == 2
+    assert main(["paper", "--out", str(blocker / "sub")] + TINY) == 3
     err = capsys.readouterr().err
     assert "--out" in err and "cannot create" in err
     assert main(["paper", "--out", str(tmp_path / "b"), "--rate", "300", "--quiet"]) == 2

@@ -50,8 +50,8 @@ def test_recorder_decodes_and_counts_every_malformed_frame():
     rec.on_message_received(encode_current_command([1.5, -0.5]))
     assert rec.counts["feedback"] == len(msgs) and rec.counts["command"] == 1
     assert rec.malformed == {"wrong_dlc": 1, "unknown_id": 1, "out_of_range": 1,
-                             "error_frame": 1, "remote_frame": 0, "non_increasing_time": 0,
-                             "decode_error": 0}
+                             "error_frame": 1, "remote_frame": 0, "non_finite_time": 0,
+                             "non_increasing_time": 0, "decode_error": 0}
     for m in (1, 2):
         r = rec.motor_record(m)
         tr = truth[m]

@@ -9,11 +9,12 @@ import json
 import math
 import os
 import tempfile
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["plain", "write_text_atomic", "write_json_atomic"]
+__all__ = ["plain", "write_text_atomic", "write_json_atomic", "atomic_target"]
 
 
 def plain(x):
@@ -51,13 +52,29 @@ def write_text_atomic(path, text: str) -> Path:
     """Write ``text`` to ``path`` through a temporary file in the same folder (flushed to disk,
     given the usual umask mode) and a rename: a reader sees the old file or the new, never half."""
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as f:
+    with atomic_target(path) as tmp:
+        with open(tmp, "w", encoding="utf-8", newline="") as f:
             f.write(text)
             f.flush()
             os.fsync(f.fileno())
-        os.chmod(tmp, _FILE_MODE)      # mkstemp makes 0600
+    return path
+
+
+def write_json_atomic(path, obj, indent: int | None = 1) -> Path:
+    """``plain(obj)`` as strict JSON (no NaN), written atomically."""
+    return write_text_atomic(path, json.dumps(plain(obj), indent=indent, allow_nan=False) + "\n")
+
+
+@contextmanager
+def atomic_target(path):
+    """A temporary path beside ``path`` with the same suffix (for writers that take a file name:
+    figures, numpy archives); renamed over ``path`` when the block ends, removed on error."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
+    os.close(fd)
+    try:
+        yield tmp
+        os.chmod(tmp, _FILE_MODE)
         os.replace(tmp, path)
     except BaseException:
         try:
@@ -65,9 +82,3 @@ def write_text_atomic(path, text: str) -> Path:
         except OSError:
             pass
         raise
-    return path
-
-
-def write_json_atomic(path, obj, indent: int | None = 1) -> Path:
-    """``plain(obj)`` as strict JSON (no NaN), written atomically."""
-    return write_text_atomic(path, json.dumps(plain(obj), indent=indent, allow_nan=False) + "\n")

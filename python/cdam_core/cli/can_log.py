@@ -5,7 +5,7 @@ import signal
 import sys
 from pathlib import Path
 
-from cdam_core.cli.common import CliError
+from cdam_core.cli.common import CliError, check_io
 
 
 def register(subparsers) -> None:
@@ -36,9 +36,12 @@ def run(args) -> int:
     from cdam_core.record.can.codec import DEFAULT_KT_OUTPUT
     from cdam_core.record.dataset import write_dataset
 
+    from cdam_core.record.dataset import sidecar_path
+
     out = Path(args.output)
-    if not out.parent.is_dir():
-        raise CliError(f"-o: folder {str(out.parent)!r} does not exist")
+    dec = Path(args.decoded) if args.decoded else None
+    check_io(files=[("-o", out), ("--decoded", dec),
+                    ("--decoded (sidecar)", dec and sidecar_path(dec))])
     recorder = C610Recorder(kt=args.kt if args.kt is not None else DEFAULT_KT_OUTPUT)
     stop = {"flag": False}
 

@@ -1,14 +1,90 @@
-"""What every command shares: the user-error type, order parsing, JSON output."""
+"""What every command shares: the error types and exit codes, the output-path check, order
+parsing, JSON out."""
 from __future__ import annotations
 
+import os
+from pathlib import Path
+
+from cdam_core.base.folders import FolderError, writable_folder
 from cdam_core.base.jsonio import write_json_atomic
 from cdam_core.base.orders import parse_orders
 
-__all__ = ["CliError", "parse_narx", "write_json"]
+__all__ = ["CliError", "CliIOError", "EXIT_CODES", "check_io", "parse_narx", "write_json"]
+
+EXIT_CODES = """exit codes:
+  0    done
+  1    done, but the result is incomplete (import-can: data lost, see the summary)
+  2    usage error or bad input; nothing written
+  3    I/O error (a file cannot be read, or an output cannot be written); nothing written
+  4    internal error (a bug: please report it)
+  130  interrupted (Ctrl-C)
+Every failure is one line on stderr: 'cdam COMMAND: error: ...'."""
 
 
 class CliError(Exception):
-    """A user error: printed as 'cdam COMMAND: error: ...' with exit code 2, no traceback."""
+    """A user error: printed as 'cdam COMMAND: error: ...' with exit code ``code`` (2)."""
+
+    code = 2
+
+
+class CliIOError(CliError):
+    """A file that cannot be read or written: exit code 3."""
+
+    code = 3
+
+
+def _same(a: Path, b: Path) -> bool:
+    if os.path.realpath(a) == os.path.realpath(b):
+        return True
+    try:
+        return a.exists() and b.exists() and os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def check_io(inputs=(), files=(), folders=()) -> None:
+    """Refuse, before any computation, outputs that would destroy an input or cannot be written.
+
+    Args:
+        inputs: ``(option, path)`` of the files read (None skipped); each is protected with its
+            JSON sidecar (``FILE.json``, see ``record.dataset.sidecar_path``).
+        files: ``(option, path)`` of the files written (None skipped); a dataset CSV's sidecar
+            is added by the caller. The folder must exist and be writable.
+        folders: ``(option, path)`` of output folders; created if missing, must be writable.
+
+    Raises CliError (an output is an input, an input's sidecar or another output) or
+    CliIOError (folder missing or not writable, output is a folder or under a file).
+    """
+    protected = []
+    for opt, p in inputs:
+        if p is not None:
+            p = Path(p)
+            protected += [(p, f"the input {p}"),
+                          (p.with_suffix(".json"), f"the sidecar of the input {p}")]
+    seen: list[tuple[str, Path]] = []
+    outs = [(o, Path(p), False) for o, p in files if p is not None] + \
+           [(o, Path(p), True) for o, p in folders if p is not None]
+    for opt, p, is_dir in outs:
+        for q, what in protected:
+            if _same(p, q):
+                raise CliError(f"{opt}: {p} is {what}; refusing to overwrite it")
+        for o2, q in seen:
+            if _same(p, q):
+                raise CliError(f"{opt}: {p} is also the output of {o2}")
+        seen.append((opt, p))
+        if is_dir:
+            _check_folder(opt, p, create=True)
+        else:
+            if p.is_dir():
+                raise CliIOError(f"{opt}: {p} is a folder, expected a file")
+            _check_folder(opt, p.parent if str(p.parent) else Path("."), create=False)
+
+
+def _check_folder(opt: str, d: Path, create: bool) -> None:
+    try:
+        writable_folder(d, create=create, what=opt)
+    except FolderError as exc:
+        raise CliIOError(str(exc)) from None
 
 
 def parse_narx(text, option: str = "--narx", allow_none: bool = False):

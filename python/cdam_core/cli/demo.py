@@ -19,6 +19,10 @@ def known_system(n: int, seed: int):
 
 def run(args) -> int:
     from cdam_core import BPNetwork
+    from cdam_core.base.jsonio import write_text_atomic
+    from cdam_core.cli.common import check_io
+
+    check_io(files=[("--json", args.json)])
 
     U, Y = known_system(4000, args.seed)
     Ut, Yt = known_system(2000, args.seed + 1)
@@ -38,8 +42,7 @@ def run(args) -> int:
     for k, v in results.items():
         print(f"{k:<20} {v['r']:>12.4f} {v['rmse']:>10.4f} {v['final_mse']:>10.2e} {v['fit_seconds']:>6.2f}")
     if args.json:
-        with open(args.json, "w") as f:
-            json.dump(results, f, indent=1)
+        write_text_atomic(args.json, json.dumps(results, indent=1))
     return 0
 
 

@@ -14,7 +14,10 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
+    from cdam_core.cli.common import check_io
     from cdam_core.firmware import export_header, load_firmware_model
+
+    check_io(inputs=[("MODEL", args.model)], files=[("-o", args.output)])
 
     fm = load_firmware_model(args.model)
     out = export_header(fm, args.output)

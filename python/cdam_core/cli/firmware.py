@@ -5,7 +5,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from cdam_core.cli.common import CliError
+from cdam_core.base.jsonio import write_text_atomic
+from cdam_core.cli.common import CliError, check_io
 
 
 def register(subparsers) -> None:
@@ -31,8 +32,8 @@ def run_check(args) -> int:
     if why:
         raise CliError(f"{why}; install gcc-arm-none-eabi, libnewlib-arm-none-eabi, "
                        "libstdc++-arm-none-eabi-newlib and qemu-system-arm")
-    if args.json_out and not Path(args.json_out).resolve().parent.is_dir():
-        raise CliError(f"--json: folder of {args.json_out!r} does not exist")
+    check_io(inputs=[("MODEL", args.model)], files=[("--json", args.json_out)],
+             folders=[("--build-dir", args.build_dir)])
     try:
         report = check(args.model, build_dir=args.build_dir, timeout=args.timeout)
     except RuntimeError as exc:
@@ -40,5 +41,5 @@ def run_check(args) -> int:
     text = json.dumps(report, indent=1)
     print(text)
     if args.json_out:
-        Path(args.json_out).write_text(text + "\n")
+        write_text_atomic(args.json_out, text + "\n")
     return 0

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from cdam_core.cli.common import CliError, parse_narx, write_json
+from cdam_core.cli.common import CliError, check_io, parse_narx, write_json
 
 
 def register(subparsers) -> None:
@@ -50,6 +50,9 @@ def run(args) -> int:
     from cdam_core.evaluate import compare
     from cdam_core.identify import IdentifyConfig
 
+    check_io(inputs=[("TRAIN", args.train), ("--test", args.test), ("--validate", args.validate)],
+             files=[("--json", args.json), ("--save", args.save)],
+             folders=[("--report", args.report)])
     if args.seeds < 1:
         raise CliError("--seeds: must be >= 1")
     if args.split is not None and not 0 < args.split < 1:

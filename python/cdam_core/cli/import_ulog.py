@@ -24,6 +24,11 @@ def run(args) -> int:
     from cdam_core.record.dataset import write_dataset
     from cdam_core.record.ulog import load_ulog
 
+    from cdam_core.cli.common import check_io
+    from cdam_core.record.dataset import sidecar_path
+
+    out = Path(args.output)
+    check_io(inputs=[("ULOG", args.ulog)], files=[("-o", out), ("-o (sidecar)", sidecar_path(out))])
     ds = load_ulog(Path(args.ulog), rate=args.rate, gap_factor=args.gap_factor)
     m = ds.meta
     write_dataset(Path(args.output), ds)

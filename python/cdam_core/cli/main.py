@@ -28,7 +28,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="cdam",
         description="Identify, check and fly the dynamics of a cable-driven aerial manipulator.",
-    )
+        formatter_class=argparse.RawDescriptionHelpFormatter, epilog=EXIT_CODES)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMANDS:
         modname = f"cdam_core.cli.{name}"
@@ -38,10 +38,30 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-from cdam_core.cli.common import CliError  # noqa: E402  (re-exported for the commands)
+from cdam_core.cli.common import EXIT_CODES, CliError  # noqa: E402  (re-exported)
+
+
+def _message(exc: BaseException) -> tuple[str, int]:
+    """(one-line message, exit code) of an error that ends a command."""
+    if isinstance(exc, CliError):
+        return str(exc), exc.code
+    if isinstance(exc, OSError):
+        code = 2 if isinstance(exc, FileNotFoundError) else 3   # a missing input: bad input
+        if exc.strerror:
+            name = f"{exc.filename}: " if exc.filename is not None else ""
+            return f"{name}{exc.strerror}", code
+        return str(exc) or type(exc).__name__, code
+    if isinstance(exc, MemoryError):
+        return "out of memory (input too large for this machine)", 3
+    if isinstance(exc, KeyError):
+        return str(exc.args[0] if exc.args else exc), 2
+    if isinstance(exc, ZeroDivisionError):
+        return f"division by zero: {exc} (an argument or the data is zero where it must not be)", 2
+    return str(exc) or type(exc).__name__, 2
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run one command; every failure is one stderr line and an exit code (see EXIT_CODES)."""
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
@@ -49,13 +69,20 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         return int(args.func(args) or 0)
-    except (CliError, ValueError, FileNotFoundError, KeyError) as exc:
-        msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
-        print(f"cdam {args.command}: error: {msg}", file=sys.stderr)
-        return 2
     except KeyboardInterrupt:
-        print(f"cdam {args.command}: interrupted", file=sys.stderr)
+        print(f"cdam {args.command}: error: interrupted", file=sys.stderr)
         return 130
+    except (CliError, OSError, MemoryError, ValueError, ArithmeticError, KeyError, TypeError,
+            UnicodeError, RecursionError) as exc:
+        msg, code = _message(exc)
+        msg = " ".join(str(msg).split())          # one line
+        print(f"cdam {args.command}: error: {msg}", file=sys.stderr)
+        return code
+    except Exception as exc:  # noqa: BLE001 - a bug; still one line, no traceback
+        msg = " ".join(f"{type(exc).__name__}: {exc}".split())
+        print(f"cdam {args.command}: error: internal error ({msg}); please report it",
+              file=sys.stderr)
+        return 4
 
 
 if __name__ == "__main__":

@@ -24,6 +24,12 @@ def run(args) -> int:
     from cdam_core.record.dataset import read_dataset, write_dataset
     from cdam_core.record.merge import merge_records
 
+    from cdam_core.cli.common import check_io
+    from cdam_core.record.dataset import sidecar_path
+
+    out = Path(args.output)
+    check_io(inputs=[("FLIGHT", args.flight), ("JOINTS", args.joints)],
+             files=[("-o", out), ("-o (sidecar)", sidecar_path(out))])
     pair = None
     if args.pair:
         parts = args.pair.split(":")

@@ -1,7 +1,7 @@
 """`cdam paper`: the paper's study (Tables 2 and 3, Figs. 8-15) on simulated flights."""
 from __future__ import annotations
 
-from cdam_core.cli.common import CliError, parse_narx
+from cdam_core.cli.common import CliError, check_io, parse_narx
 
 
 def register(subparsers) -> None:
@@ -43,7 +43,7 @@ def register(subparsers) -> None:
 def run(args) -> int:
     import sys
 
-    from cdam_core.paper import PaperConfig, check_out_dir, run_paper
+    from cdam_core.paper import PaperConfig, run_paper
     from cdam_core.report.paper.tables import mode_label
 
     if args.seeds < 1:
@@ -55,10 +55,7 @@ def run(args) -> int:
         raise CliError("--iterations/--smoothing: must be >= 0")
     if not args.duration > 0:
         raise CliError(f"--duration: must be positive, got {args.duration}")
-    try:
-        check_out_dir(args.out)
-    except ValueError as exc:
-        raise CliError(f"--out: {str(exc).removeprefix('out: ')}") from None
+    check_io(folders=[("--out", args.out)])
     try:
         cfg = PaperConfig(seeds=args.seeds, flight_seed=args.flight_seed, duration=args.duration,
                           rate=args.rate, smoothing=args.smoothing, hidden=args.hidden,

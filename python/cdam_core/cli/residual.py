@@ -2,7 +2,11 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
+
+from cdam_core.base.jsonio import write_text_atomic
+from cdam_core.cli.common import CliError, check_io
 
 
 def _split(s):
@@ -28,6 +32,12 @@ def run(args) -> int:
     from cdam_core.residual import analyse
     from cdam_core.models.greybox.registry import get_model
 
+    check_io(inputs=[("DATA", args.data)], files=[("--json", args.json)],
+             folders=[("--report", args.report)])
+    if args.cutoff is not None and not (math.isfinite(args.cutoff) and args.cutoff > 0):
+        raise CliError(f"--cutoff: expected a positive frequency in Hz, got {args.cutoff}")
+    if not 0 < args.alpha < 1:
+        raise CliError(f"--alpha: expected a significance level in (0, 1), got {args.alpha}")
     model = get_model(args.model)  # fails early, clearly, for an unknown model
     mapping = dict(model.defaults)
     given = parse_map(args.map)
@@ -65,7 +75,7 @@ def run(args) -> int:
     if args.save:
         js["saved_model"] = _save(args.save, sel, mapping, ds, args)
     if args.json:
-        Path(args.json).write_text(json.dumps(js, indent=2))
+        write_text_atomic(args.json, json.dumps(js, indent=2))
     if args.report:
         write_report(sel, args.report, title=Path(args.data).name, source=str(args.data))
     if not args.json:

@@ -44,6 +44,12 @@ def run(args) -> int:
     out = Path(args.output)
     if out.suffix.lower() != ".csv":
         raise CliError(f"-o/--output: expected a .csv file name, got {out.name!r}")
+    from cdam_core.cli.common import check_io
+    from cdam_core.record.dataset import sidecar_path
+
+    vout = out.with_name(out.stem + "_validation.csv") if args.validation else None
+    check_io(files=[("-o", out), ("-o (sidecar)", sidecar_path(out)), ("--validation", vout),
+                    ("--validation (sidecar)", vout and sidecar_path(vout))])
     kw = dict(experiment=args.experiment, seed=args.seed, effects=args.effect,
               declare=args.declare, noise_scale=args.noise_scale)
     ds = simulate_flight(duration=args.duration, **kw)
@@ -51,7 +57,7 @@ def run(args) -> int:
     print(f"wrote {out} ({len(ds)} samples, {len(ds.columns)} columns; "
           f"effects: {', '.join(ds.meta['effects'])})")
     if args.validation:
-        vpath = out.with_name(out.stem + "_validation.csv")
+        vpath = vout
         vs = simulate_flight(validation=True, duration=None, **kw)
         write_flight(vpath, vs)
         print(f"wrote {vpath} ({len(vs)} samples, seed {vs.meta['record_seed']})")

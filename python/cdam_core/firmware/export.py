@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from cdam_core import _core
+from cdam_core.base.jsonio import write_text_atomic
 from cdam_core.base.rng import Rng
 
 from cdam_core.firmware.model import FirmwareModel, load_firmware_model, theta_fnv1a
@@ -85,7 +86,7 @@ def export_header(model, out) -> Path:
         "}  // namespace cdam_model",
         "",
     ]
-    out.write_text("\n".join(text))
+    write_text_atomic(out, "\n".join(text))
     return out
 
 
@@ -143,5 +144,5 @@ def export_optim_data(out, seed: int = OPTIM_DATA_SEED, n: int = OPTIM_SAMPLES) 
         "}  // namespace cdam_optim_data",
         "",
     ]
-    out.write_text("\n".join(text))
+    write_text_atomic(out, "\n".join(text))
     return out

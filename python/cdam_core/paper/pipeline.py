@@ -19,7 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from cdam_core.base.jsonio import plain
+from cdam_core.base.folders import FolderError, writable_folder
+from cdam_core.base.jsonio import atomic_target, plain, write_text_atomic
 
 from cdam_core.report.paper import figures
 from cdam_core.evaluate.baselines import persistence
@@ -39,16 +40,10 @@ RECORD_FILES = {"exp_i": "flight_i.csv", "exp_ii": "flight_ii.csv",
 
 def check_out_dir(out) -> Path:
     """Create ``out`` if needed and check it is a writable folder (ValueError otherwise)."""
-    d = Path(out)
-    if d.exists() and not d.is_dir():
-        raise ValueError(f"out: {d} exists and is not a folder")
     try:
-        d.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise ValueError(f"out: cannot create {d}: {exc.strerror or exc}") from None
-    if not os.access(d, os.W_OK | os.X_OK):
-        raise ValueError(f"out: {d} is not writable")
-    return d
+        return writable_folder(out, create=True, what="out")
+    except FolderError as exc:
+        raise ValueError(str(exc)) from None
 
 
 def _bar(total, enabled):
@@ -145,7 +140,8 @@ def run_paper(config: PaperConfig | None = None, out="paper_out", *, progress: b
     for key, fname in RECORD_FILES.items():
         write_flight(d / fname, records[key])
         files["records"] += [fname, fname.replace(".csv", ".json")]
-    np.savez_compressed(d / "predictions.npz", **preds)
+    with atomic_target(d / "predictions.npz") as tmp:
+        np.savez_compressed(tmp, **preds)
     files["predictions"] = "predictions.npz"
     files.update(_figures(d, records, data, sections, preds, best_seeds, cfg.smoothing))
     tables = {label: paper_tables(sec) for label, sec in sections.items()}
@@ -181,7 +177,7 @@ def run_paper(config: PaperConfig | None = None, out="paper_out", *, progress: b
     lines = index_lines(result)
     md, page = write_index(d, lines, result["title"])
     files["index"] = [md.name, page.name, "results.json"]
-    (d / "results.json").write_text(json.dumps(plain(result), indent=1), encoding="utf-8")
+    write_text_atomic(d / "results.json", json.dumps(plain(result), indent=1))
     bar.update()
     bar.close()
     return result

@@ -207,6 +207,63 @@ def _read_sidecar(path: Path) -> dict:
     return meta
 
 
+# A declared rate is the writer's grid rate or a logger's nominal rate; a real clock (crystal
+# error, jitter) is within a fraction of a percent of it, so 5 % separates a nominal rate from a
+# wrong one (10 Hz declared on 1 kHz data) with room to spare.
+RATE_TOLERANCE = 0.05
+_INTERP = ("linear", "hold", "angle")
+
+
+def _names(v) -> bool:
+    return isinstance(v, list) and all(isinstance(x, str) for x in v)
+
+
+def check_sidecar(meta: dict, t: np.ndarray, header: list[str], where) -> None:
+    """The sidecar's known fields against their types and the data (ValueError naming the
+    field): ``rate`` a positive number within RATE_TOLERANCE of 1 / median step of ``t``;
+    ``units`` and ``interpolation`` maps of column -> text; ``columns`` the CSV header;
+    ``inputs``/``outputs`` a list of names or one comma-separated text; ``effects`` a list of names (or
+    name -> parameters), ``model.effects`` a list of names; ``model`` a name or an object."""
+    def bad(field, msg):
+        raise ValueError(f"{where}: sidecar field {field!r}: {msg}")
+
+    rate = meta.get("rate")
+    if rate is not None:
+        if isinstance(rate, bool) or not isinstance(rate, (int, float)) or \
+                not (np.isfinite(rate) and rate > 0):
+            bad("rate", f"expected a positive number of Hz, got {rate!r}")
+        if t.size >= 2:
+            measured = 1.0 / float(np.median(np.diff(t)))
+            if abs(rate / measured - 1.0) > RATE_TOLERANCE:
+                bad("rate", f"declares {rate:g} Hz but the time column's median step gives "
+                            f"{measured:.6g} Hz (tolerance {RATE_TOLERANCE:.0%})")
+    for key in ("units", "interpolation"):
+        v = meta.get(key)
+        if v is not None and not (isinstance(v, dict) and
+                                  all(isinstance(x, str) for x in v.values())):
+            bad(key, f"expected an object of column -> text, got {type(v).__name__}")
+    for col, kind in (meta.get("interpolation") or {}).items():
+        if kind not in _INTERP:
+            bad("interpolation", f"{col}: expected one of {', '.join(_INTERP)}, got {kind!r}")
+    cols = meta.get("columns")
+    if cols is not None and cols != header:
+        bad("columns", f"{cols!r} disagrees with the CSV header {header!r}")
+    for key in ("inputs", "outputs"):
+        v = meta.get(key)
+        if v is not None and not (isinstance(v, str) or _names(v)):
+            bad(key, f"expected a list of column names, got {type(v).__name__}")
+    model = meta.get("model")
+    if model is not None and not isinstance(model, (dict, str)):
+        bad("model", f"expected a name or an object, got {type(model).__name__}")
+    eff = meta.get("effects")
+    if eff is not None and not (_names(eff) or isinstance(eff, dict)):
+        bad("effects", f"expected a list of effect names or an object of name -> parameters, "
+                       f"got {json.dumps(eff)[:60]}")
+    eff = model.get("effects") if isinstance(model, dict) else None
+    if eff is not None and not _names(eff):
+        bad("model.effects", f"expected a list of effect names, got {json.dumps(eff)[:60]}")
+
+
 def _locate_bad_row(path: Path, lines: list[str], ncol: int, columns: list[str]) -> None:
     """Slow path after the fast parser failed: find the first bad line and raise."""
     for k, line in enumerate(lines[1:], start=2):
@@ -234,7 +291,8 @@ def read_dataset(path: str | os.PathLike, inputs: Sequence[str] | str | None = N
     Raises:
         ValueError naming the file and line: empty file, missing ``t`` (must be first),
         duplicate or empty column name, wrong number of cells, non-numeric, NaN or Inf cell,
-        non-increasing ``t``, unknown requested column, corrupt sidecar.
+        non-increasing ``t``, unknown requested column, corrupt sidecar or one that disagrees
+        with the data (``check_sidecar``).
         FileNotFoundError if the file does not exist.
     """
     path = Path(path)
@@ -278,6 +336,7 @@ def read_dataset(path: str | os.PathLike, inputs: Sequence[str] | str | None = N
         raise ValueError(f"{path}: line {r + 2}: t not strictly increasing "
                          f"({t[r - 1]!r} -> {t[r]!r})")
     meta = _read_sidecar(path)
+    check_sidecar(meta, t, header, sidecar_path(path))
     try:
         return Dataset(t=t.copy(), columns=columns, data=arr[:, 1:], meta=meta,
                        input_names=inputs, output_names=outputs)

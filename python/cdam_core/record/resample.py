@@ -9,7 +9,9 @@ Three kinds of signal, one interpolation each:
 - ``"angle"``: angles that may wrap at +-pi: unwrapped (``numpy.unwrap``) then linear; the
   result stays unwrapped (continuous), which is what identification wants.
 
-The grid covers only the span where every signal has data (no extrapolation).
+The grid covers only the span where every signal has data (no extrapolation). Every grid is
+sized by ``grid_size``, which refuses more than MAX_GRID_SAMPLES samples (GridTooLarge): a grid
+derived from data (one timestamp far from the rest, a tiny step) must not exhaust memory.
 """
 from __future__ import annotations
 
@@ -18,9 +20,33 @@ from typing import Mapping, Sequence
 import numpy as np
 from scipy.interpolate import interp1d
 
-__all__ = ["KINDS", "uniform_grid", "resample", "find_gaps", "check_time"]
+__all__ = ["KINDS", "MAX_GRID_SAMPLES", "GridTooLarge", "grid_size", "uniform_grid",
+           "segmented_grid", "resample", "find_gaps", "check_time"]
 
 KINDS = ("linear", "hold", "angle")
+
+# Largest grid any resampling builds: 10 million samples is 2.8 h at 1 kHz, 80 MB per float64
+# column, about 1 GB for a 12-column record in memory and 2 GB of CSV text; a larger grid comes
+# from a bad timestamp or rate far more often than from a real record (split it instead).
+MAX_GRID_SAMPLES = 10_000_000
+
+
+class GridTooLarge(ValueError):
+    """A resampling grid above MAX_GRID_SAMPLES samples."""
+
+
+def grid_size(start: float, stop: float, rate: float) -> int:
+    """Samples of the grid start, start + 1/rate, ... <= stop; GridTooLarge above the limit."""
+    if not (np.isfinite(rate) and rate > 0):
+        raise ValueError(f"rate: expected a positive finite rate in Hz, got {rate!r}")
+    if not (np.isfinite(start) and np.isfinite(stop)) or stop <= start:
+        raise ValueError(f"start, stop: empty or invalid span [{start!r}, {stop!r}]")
+    n = float(np.floor((stop - start) * rate + 1e-9)) + 1
+    if not n <= MAX_GRID_SAMPLES:
+        raise GridTooLarge(
+            f"rate: {stop - start:.6g} s at {rate:g} Hz is {n:.4g} samples, above the limit of "
+            f"{MAX_GRID_SAMPLES:,} (MAX_GRID_SAMPLES); check the timestamps or lower the rate")
+    return int(n)
 
 
 def check_time(t, name: str = "t") -> np.ndarray:
@@ -38,12 +64,37 @@ def check_time(t, name: str = "t") -> np.ndarray:
 
 def uniform_grid(start: float, stop: float, rate: float) -> np.ndarray:
     """Times start, start + 1/rate, ... <= stop (computed as start + k / rate, no drift)."""
+    return start + np.arange(grid_size(start, stop, rate)) / rate
+
+
+def segmented_grid(intervals, rate: float, origin: float) -> tuple[np.ndarray, list]:
+    """Grid times origin + k / rate inside each (start, stop) interval, none between them.
+
+    Returns (grid, [(first row, end row) per interval with at least 2 samples]). The total is
+    bounded by MAX_GRID_SAMPLES like every grid.
+    """
     if not (np.isfinite(rate) and rate > 0):
         raise ValueError(f"rate: expected a positive finite rate in Hz, got {rate!r}")
-    if not (np.isfinite(start) and np.isfinite(stop)) or stop <= start:
-        raise ValueError(f"start, stop: empty or invalid span [{start!r}, {stop!r}]")
-    n = int(np.floor((stop - start) * rate + 1e-9)) + 1
-    return start + np.arange(n) / rate
+    ks = []
+    for s, e in intervals:
+        k0 = int(np.ceil((s - origin) * rate))
+        k0 += origin + k0 / rate < s                      # grid times exactly inside [s, e]
+        k0 -= k0 > 0 and origin + (k0 - 1) / rate >= s
+        k1 = int(np.floor((e - origin) * rate))
+        k1 -= origin + k1 / rate > e
+        k1 += origin + (k1 + 1) / rate <= e
+        if k1 > k0:
+            ks.append((k0, k1))
+    total = sum(k1 - k0 + 1 for k0, k1 in ks)
+    if total > MAX_GRID_SAMPLES:
+        raise GridTooLarge(f"rate: {total:,} samples at {rate:g} Hz, above the limit of "
+                           f"{MAX_GRID_SAMPLES:,} (MAX_GRID_SAMPLES)")
+    parts, rows, r = [], [], 0
+    for k0, k1 in ks:
+        parts.append(origin + np.arange(k0, k1 + 1) / rate)
+        rows.append((r, r + k1 - k0 + 1))
+        r += k1 - k0 + 1
+    return (np.concatenate(parts) if parts else np.empty(0)), rows
 
 
 def resample(t, x, grid, kind: str = "linear") -> np.ndarray:

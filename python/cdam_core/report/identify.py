@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from cdam_core.base.metrics import adaptation_value
+from cdam_core.base.jsonio import atomic_target, write_text_atomic
 from cdam_core.preprocess import smooth_pair
 
 __all__ = ["write_report"]
@@ -43,7 +44,8 @@ def _convergence_figure(result, path):
     ax.grid(True, alpha=0.3)
     ax.legend()
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    with atomic_target(path) as tmp:
+        fig.savefig(tmp, dpi=110)
     plt.close(fig)
 
 
@@ -69,7 +71,8 @@ def _prediction_figure(models, record, names, passes, t, path, title):
     axes[-1, 0].set_xlabel("t (s)" if t is not None else "sample")
     fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    with atomic_target(path) as tmp:
+        fig.savefig(tmp, dpi=110)
     plt.close(fig)
 
 
@@ -82,7 +85,8 @@ def _times_figure(result, path):
            yerr=[s[a]["seconds"]["std"] for a in algos], capsize=4)
     ax.set_ylabel("run time per seed (s)")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    with atomic_target(path) as tmp:
+        fig.savefig(tmp, dpi=110)
     plt.close(fig)
 
 
@@ -150,5 +154,5 @@ def write_report(comparison, directory, *, records: dict | None = None,
                            d / fname, f"{rec}: measured and predicted (best seed per algorithm)")
         lines += [f"![{rec}]({fname})", ""]
     md = d / "report.md"
-    md.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    write_text_atomic(md, "\n".join(lines) + "\n")
     return md

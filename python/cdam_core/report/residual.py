@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cdam_core.base.jsonio import plain
+from cdam_core.base.jsonio import atomic_target, plain, write_text_atomic
 
 from cdam_core.residual import diagnostics as dg
 from cdam_core.residual.selection import Selection
@@ -88,7 +88,8 @@ def _figure_finding(path: Path, sel: Selection, i: int) -> None:
     ax[1, 1].set(title=f"{eff.key} regressor against residual before", xlabel="regressor",
                  ylabel="residual")
     fig.tight_layout()
-    fig.savefig(path, dpi=90)
+    with atomic_target(path) as tmp:
+        fig.savefig(tmp, dpi=90)
     plt.close(fig)
 
 
@@ -108,7 +109,8 @@ def _figure_spectrum(path: Path, sel: Selection) -> None:
     ax.set(xlabel="frequency [Hz]", ylabel="PSD", title="residual spectrum (Welch)")
     ax.legend()
     fig.tight_layout()
-    fig.savefig(path, dpi=90)
+    with atomic_target(path) as tmp:
+        fig.savefig(tmp, dpi=90)
     plt.close(fig)
 
 
@@ -119,7 +121,7 @@ def write_report(sel: Selection, out_dir, title: str | None = None, source: str 
         raise ValueError(f"out_dir: {out} exists and is not a folder")
     out.mkdir(parents=True, exist_ok=True)
     js = to_json(sel)
-    (out / "residual.json").write_text(json.dumps(js, indent=2))
+    write_text_atomic(out / "residual.json", json.dumps(js, indent=2))
     lines = [f"# Residual analysis: {title or sel.model.name}", ""]
     if source:
         lines += [f"Data: {source}", ""]
@@ -165,5 +167,5 @@ def write_report(sel: Selection, out_dir, title: str | None = None, source: str 
         lines += ["None found (no spectral peak of 1 decade or more)."]
     _figure_spectrum(out / "spectrum.png", sel)
     lines += ["", "![spectrum](spectrum.png)", ""]
-    (out / "index.md").write_text("\n".join(lines))
+    write_text_atomic(out / "index.md", "\n".join(lines))
     return out / "index.md"

@@ -5,7 +5,7 @@ Writing uses ``can.Logger`` (the writer is chosen by suffix: candump ``.log``, `
 least every ``flush_interval`` seconds (default 50 ms), so a logger killed with SIGKILL leaves a
 text log complete up to at most one flush interval before the kill (page cache survives a
 process kill; an ``fsync`` would only matter for a power loss). A kill may cut the last line:
-``iter_log`` stops there and reports it instead of failing. BLF is a compressed container
+``iter_log`` reports it; a bad line elsewhere is counted, named by its number and skipped. BLF is a compressed container
 format: each flush closes a container (``BLFWriter`` keeps up to 128 KiB otherwise).
 """
 from __future__ import annotations
@@ -125,21 +125,75 @@ def log_bus(bus: can.BusABC, path: str | Path, *, duration: float | None = None,
     return {"frames": n, "seconds": time.monotonic() - start, "path": str(path)}
 
 
-def iter_log(path: str | Path, report: dict | None = None) -> Iterator[can.Message]:
-    """Frames of a python-can log file (``can.LogReader``, format by suffix).
+class _Lines:
+    """A text file's lines, numbered from 1, read one ahead (so ``at_end`` knows the last);
+    ``push`` puts a line back in front (not counted)."""
 
-    A log cut by a kill may end in a partial record: reading stops there and, if ``report`` is
-    given, ``report["truncated"]`` is set to the error text (else False).
-    """
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such file")
-    if path.suffix.lower() not in LOG_SUFFIXES:
-        raise ValueError(f"path: log suffix must be one of {', '.join(LOG_SUFFIXES)}, "
-                         f"got {path.name!r}")
-    if report is not None:
-        report["truncated"] = False
-    reader = can.LogReader(str(path))
+    def __init__(self, f):
+        self._f, self._pushed = f, []
+        self._ahead = next(f, None)
+        self.lineno, self.last = 0, ""
+
+    def __iter__(self):
+        return self
+
+    def __next__(self) -> str:
+        if self._pushed:
+            return self._pushed.pop()
+        if self._ahead is None:
+            raise StopIteration
+        self.last, self._ahead = self._ahead, next(self._f, None)
+        self.lineno += 1
+        return self.last
+
+    @property
+    def at_end(self) -> bool:
+        return self._ahead is None
+
+    def push(self, line: str) -> None:
+        self._pushed.append(line)
+
+    def close(self) -> None:   # python-can's reader.stop(); the file is closed by iter_log
+        pass
+
+
+_TEXT_READERS = {".log": can.CanutilsLogReader, ".asc": can.ASCReader, ".csv": can.CSVReader}
+_ASC_STATE = ("base", "_converted_base", "start_time", "date", "timestamps_format",
+              "relative_timestamp", "internal_events_logged")
+MAX_LISTED_LINES = 20     # skipped lines listed with their reason in the report (all are counted)
+
+
+def _text_frames(path: Path, report: dict) -> Iterator[can.Message]:
+    """Frames of a text log; a line python-can cannot parse is recorded and skipped."""
+    cls = _TEXT_READERS[path.suffix.lower()]
+    with open(path, encoding="utf-8", errors="replace", newline=None) as f:
+        lines = _Lines(f)
+        reader = cls(lines)
+        while True:
+            it = iter(reader)
+            try:
+                for msg in it:
+                    yield msg
+                return
+            except Exception as exc:  # noqa: BLE001 - any parse failure is one bad line
+                reason = f"{type(exc).__name__}: {exc}"
+                if lines.at_end and not lines.last.endswith("\n"):
+                    report["truncated"] = f"line {lines.lineno}: {reason}"   # cut by a kill
+                    return
+                report["skipped_lines"] += 1
+                if len(report["skipped"]) < MAX_LISTED_LINES:
+                    report["skipped"].append({"line": lines.lineno, "reason": reason[:200]})
+            # a new reader goes on with the next line; its header skip eats a blank line
+            old, reader = reader, cls(lines)
+            for name in _ASC_STATE if cls is can.ASCReader else ():
+                setattr(reader, name, getattr(old, name))
+            lines.push("")
+
+
+def _blf_frames(path: Path, report: dict) -> Iterator[can.Message]:
+    """Frames of a BLF file; a corrupt object ends the reading (a binary container has no lines
+    to resume at) and is reported as ``truncated``."""
+    reader = can.BLFReader(str(path))
     try:
         it = iter(reader)
         while True:
@@ -147,12 +201,36 @@ def iter_log(path: str | Path, report: dict | None = None) -> Iterator[can.Messa
                 msg = next(it)
             except StopIteration:
                 return
-            except Exception as exc:  # partial last record after a kill, or corrupt tail
-                if report is not None:
-                    report["truncated"] = f"{type(exc).__name__}: {exc}"
+            except Exception as exc:  # noqa: BLE001 - partial last container after a kill
+                report["truncated"] = f"{type(exc).__name__}: {exc}"
                 return
             yield msg
     finally:
-        stop = getattr(reader, "stop", None)
-        if stop:
-            stop()
+        reader.stop()
+
+
+def iter_log(path: str | Path, report: dict | None = None) -> Iterator[can.Message]:
+    """Frames of a python-can log file (format by suffix).
+
+    Text logs (.log candump, .asc, .csv) are read line by line: a line that cannot be parsed
+    (bad hex, a stray text line, bad base64) is counted and skipped, and reading goes on with
+    the next one. The last line without its newline (a logger killed mid-write) is reported as
+    ``truncated`` instead. A BLF file stops at its first corrupt object (``truncated``). Lines
+    python-can's ASC reader ignores by design (comments, events) are not frames and not counted.
+
+    ``report`` (if given) receives ``skipped_lines`` (count), ``skipped`` (the first
+    MAX_LISTED_LINES as ``{"line": n, "reason": text}``, lines numbered from 1) and
+    ``truncated`` (the error text, else False).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such file")
+    if path.suffix.lower() not in LOG_SUFFIXES:
+        raise ValueError(f"path: log suffix must be one of {', '.join(LOG_SUFFIXES)}, "
+                         f"got {path.name!r}")
+    rep = report if report is not None else {}
+    rep.update(truncated=False, skipped_lines=0, skipped=[])
+    if path.suffix.lower() == ".blf":
+        yield from _blf_frames(path, rep)
+    else:
+        yield from _text_frames(path, rep)

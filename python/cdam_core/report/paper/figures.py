@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from cdam_core.base.metrics import adaptation_value
+from cdam_core.base.jsonio import atomic_target
 from cdam_core.report.paper.published import LABEL
 
 __all__ = ["preprocessing_figure", "convergence_figure", "identified_figure"]
@@ -29,7 +30,8 @@ def _finish(fig, path, top_inches=0.45, bottom_inches=0.5):
     h = fig.get_figheight()
     fig.subplots_adjust(left=0.1, right=0.98, top=1 - top_inches / h,
                         bottom=bottom_inches / h, hspace=0.15 if len(fig.axes) > 2 else 0.3)
-    fig.savefig(path, dpi=_DPI)
+    with atomic_target(path) as tmp:
+        fig.savefig(tmp, dpi=_DPI)
     import matplotlib.pyplot as plt
     plt.close(fig)
 
@@ -77,7 +79,8 @@ def convergence_figure(sections: dict, path: Path) -> None:
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=8)
     fig.subplots_adjust(left=0.07, right=0.99, top=0.9, bottom=0.14, wspace=0.2)
-    fig.savefig(path, dpi=_DPI)
+    with atomic_target(path) as tmp:
+        fig.savefig(tmp, dpi=_DPI)
     plt.close(fig)
 
 

@@ -6,6 +6,8 @@ from pathlib import Path
 
 import markdown
 
+from cdam_core.base.jsonio import write_text_atomic
+
 __all__ = ["write_index", "markdown_to_html"]
 
 
@@ -24,6 +26,6 @@ def write_index(directory: Path, lines: list[str], title: str) -> tuple[Path, Pa
     """Write index.md and index.html; returns their paths."""
     d = Path(directory)
     md, page = d / "index.md", d / "index.html"
-    md.write_text("\n".join(lines) + "\n", encoding="utf-8")
-    page.write_text(markdown_to_html(lines, title), encoding="utf-8")
+    write_text_atomic(md, "\n".join(lines) + "\n")
+    write_text_atomic(page, markdown_to_html(lines, title))
     return md, page
