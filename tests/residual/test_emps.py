@@ -83,3 +83,35 @@ def test_emps_pulses_resonance_is_unexplained():
     d = load_emps("DATA_EMPS")
     sel0 = analyse("rigid_axis", d["t"], {"tau": d["force"], "q": d["qm"]}, free_run=False)
     assert not any(15.0 <= u["frequency_hz"] <= 27.0 for u in sel0.unexplained)
+
+
+def test_benchmark_protocol_reproduces_the_published_model():
+    """nonlinearbenchmark.org's EMPS protocol (all of vir, the first 20 samples of qm, open-loop
+    simulation, RMSE of qm in mm over the rest) on the published IDIM-LS parameters: 8.4 mm as
+    measured for issue [greybox] with an independent simulation."""
+    from cdam_core.evaluate.simulation import EMPS_PROTOCOL, simulation_score
+    from cdam_core.models.greybox.augmented import GreyBox
+    from cdam_core.models.greybox.effects import CoulombFriction
+    p = load_emps("DATA_EMPS_PULSES")
+    g = GreyBox("rigid_axis", 0.001, [CoulombFriction("tau")])
+    g._set(g._structure(), {"M": PUBLISHED["M"], "Fv": PUBLISHED["Fv"],
+                            "offset": PUBLISHED["offset"],
+                            "coulomb_friction@tau.Fc": PUBLISHED["Fc"]}, {}, [], 1, 1)
+    sc = simulation_score(g, p["force"], p["qm"], EMPS_PROTOCOL["n_init"], EMPS_PROTOCOL["scale"])
+    assert sc.status == "ok"
+    assert sc.rmse[0] == pytest.approx(8.4, abs=0.1)
+
+
+@pytest.mark.xfail(strict=True, reason="issue [greybox]: target <= 6 mm on the protocol; the "
+                                        "final model of today's residual loop is not there")
+def test_residual_final_model_meets_the_benchmark_target(emps_selection):
+    """The residual loop's final model (DATA_EMPS), simulated on DATA_EMPS_PULSES under the
+    protocol, at or below the issue's 6 mm target (published IDIM-LS: 8.4 mm)."""
+    from cdam_core.evaluate.simulation import EMPS_PROTOCOL
+    from cdam_core.residual.benchmark import protocol_scores
+    p = load_emps("DATA_EMPS_PULSES")
+    sc = protocol_scores(emps_selection, {"t": p["t"], "tau": p["force"], "q": p["qm"]},
+                         EMPS_PROTOCOL["n_init"], EMPS_PROTOCOL["scale"])
+    print({k: v.rmse for k, v in sc.items()})
+    assert sc["declared"].status == "ok" and sc["final"].status == "ok"
+    assert sc["final"].rmse[0] <= 6.0

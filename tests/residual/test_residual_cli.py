@@ -90,3 +90,28 @@ def test_cli_on_a_simulated_flight(tmp_path):
     assert [(f["effect"], f["channel"]) for f in js["findings"]] == [("thrust_loss", "Z")]
     assert js["findings"][0]["parameters"]["c"] == pytest.approx(0.005, rel=0.2)
     assert set(js["declared_error"]) >= {"X", "Z", "tau_theta", "tau_m1", "tau_l2"}
+
+
+def test_cli_test_record_under_the_simulation_protocol(tmp_path):
+    """--test: the declared and final models simulated on another record from its first
+    --n-init outputs; --simulated writes them beside the measured output."""
+    _csv(tmp_path / "a.csv", rigid_axis_record(seed=2, Fc=1.5, duration=6.0))
+    test = rigid_axis_record(seed=5, Fc=1.5, duration=4.0)
+    _csv(tmp_path / "b.csv", test)
+    assert main(["residual", str(tmp_path / "a.csv"), "--model", "rigid_axis", "--map",
+                 "tau=force,q=pos", "--no-free-run", "--test", str(tmp_path / "b.csv"),
+                 "--n-init", "20", "--simulated", str(tmp_path / "sim.csv"), "--json",
+                 str(tmp_path / "o.json")]) == 0
+    js = json.loads((tmp_path / "o.json").read_text())["test"]
+    dec, fin = js["scores"]["declared"], js["scores"]["final"]
+    assert dec["status"] == fin["status"] == "ok"
+    assert fin["rmse"][0] < 0.5 * dec["rmse"][0]      # the Coulomb term the declared lacks
+    sim = np.genfromtxt(tmp_path / "sim.csv", delimiter=",", names=True)
+    assert sim.dtype.names == ("t", "pos", "pos_declared", "pos_final")
+    np.testing.assert_allclose(sim["pos"], test["q"], rtol=1e-9, atol=1e-12)
+    np.testing.assert_array_equal(sim["pos_final"][:20], sim["pos"][:20])
+    rmse = np.sqrt(np.mean((sim["pos_final"][20:] - sim["pos"][20:]) ** 2))
+    assert rmse == pytest.approx(fin["rmse"][0], rel=1e-6)
+    assert main(["residual", str(tmp_path / "a.csv"), "--model", "rigid_axis", "--map",
+                 "tau=force,q=pos", "--test", str(tmp_path / "a.csv"), "--simulated",
+                 str(tmp_path / "a.csv")]) != 0     # never over an input

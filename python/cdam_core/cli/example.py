@@ -26,10 +26,33 @@ def emps_report(out_dir) -> Path:
     out = write_report(sel, out_dir, title="EMPS (DATA_EMPS, free run on DATA_EMPS_PULSES)",
                        source="EMPS benchmark (Janot, Gautier, Brunot 2019): force = gtau * vir, "
                               "output qm; free-run errors on DATA_EMPS_PULSES")
+    _emps_benchmark(sel, p, Path(out_dir))
     selp = analyse("rigid_axis", p["t"], {"tau": p["force"], "q": p["qm"]}, free_run=False)
     write_report(selp, Path(out_dir) / "pulses", title="EMPS DATA_EMPS_PULSES",
                  source="EMPS benchmark, DATA_EMPS_PULSES (pulses inside vir)")
     return out
+
+
+def _emps_benchmark(sel, p: dict, out_dir: Path) -> None:
+    """nonlinearbenchmark.org's EMPS protocol: the declared and final models (fitted on
+    DATA_EMPS) simulated on DATA_EMPS_PULSES; printed beside the published results and written
+    to ``benchmark.json``."""
+    from cdam_core.base.jsonio import write_json_atomic
+    from cdam_core.evaluate.simulation import EMPS_PROTOCOL, EMPS_PUBLISHED
+    from cdam_core.residual.benchmark import protocol_scores
+    sc = protocol_scores(sel, {"t": p["t"], "tau": p["force"], "q": p["qm"]},
+                         EMPS_PROTOCOL["n_init"], EMPS_PROTOCOL["scale"])
+    rows = [(f"cdam {k} model ({', '.join(e.key for e in f.effects) or 'no effects'})",
+             v.rmse[0] if v.status == "ok" else None, v.reason or "this run")
+            for (k, v), f in zip(sc.items(), (sel.declared, sel.final))]
+    rows += list(EMPS_PUBLISHED)
+    print(f"EMPS benchmark (train DATA_EMPS, test DATA_EMPS_PULSES, first "
+          f"{EMPS_PROTOCOL['n_init']} samples of qm given, simulation RMSE of qm):")
+    for name, v, src in rows:
+        print(f"  {name:<60} {'n/a' if v is None else f'{v:7.2f}'} mm   {src}")
+    write_json_atomic(out_dir / "benchmark.json",
+                      {"protocol": EMPS_PROTOCOL,
+                       "results": [{"model": n, "rmse_mm": v, "source": s} for n, v, s in rows]})
 
 
 def flight_report(out_dir, seed: int = 3) -> Path:

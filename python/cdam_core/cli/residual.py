@@ -32,8 +32,13 @@ def run(args) -> int:
     from cdam_core.residual import analyse
     from cdam_core.models.greybox.registry import get_model
 
-    check_io(inputs=[("DATA", args.data)], files=[("--json", args.json)],
+    check_io(inputs=[("DATA", args.data), ("--test", args.test)],
+             files=[("--json", args.json), ("--save", args.save), ("--simulated", args.simulated)],
              folders=[("--report", args.report)])
+    if args.simulated and not args.test:
+        raise CliError("--simulated: needs --test (the record simulated)")
+    if args.n_init < 1:
+        raise CliError(f"--n-init: must be >= 1, got {args.n_init}")
     if args.cutoff is not None and not (math.isfinite(args.cutoff) and args.cutoff > 0):
         raise CliError(f"--cutoff: expected a positive frequency in Hz, got {args.cutoff}")
     if not 0 < args.alpha < 1:
@@ -72,6 +77,8 @@ def run(args) -> int:
     js = to_json(sel)
     js["source"] = str(args.data)
     js["declared_effects"] = declared
+    if args.test:
+        js["test"] = _test(args, mapping, inputs, sel)
     if args.save:
         js["saved_model"] = _save(args.save, sel, mapping, ds, args)
     if args.json:
@@ -85,21 +92,58 @@ def run(args) -> int:
             print(f"found {f['effect']} on {f['channel']}: {f['parameters']}")
         for u in js["unexplained"]:
             print(f"unexplained structure on {u['channel']} at {u['frequency_hz']:.1f} Hz")
+        for label, sc in (js.get("test") or {}).get("scores", {}).items():
+            print(f"test simulation ({label} model): " + (
+                ", ".join(f"{o} rmse {v:.4g}" for o, v in zip(js["test"]["outputs"], sc["rmse"]))
+                if sc["status"] == "ok" else f"{sc['status']}: {sc['reason']}"))
     return 0
+
+
+def _test(args, mapping: dict, inputs: list, sel) -> dict:
+    """Simulate the declared and final models on the --test record from its first --n-init
+    outputs; write the simulated outputs with --simulated."""
+    import numpy as np
+    from cdam_core.record.dataset import read_dataset
+    from cdam_core.residual.benchmark import protocol_scores
+    ts = read_dataset(args.test, inputs=inputs or None)
+    cols = dict(mapping)
+    cols.update({c: c for c in inputs if c not in mapping.values()})
+    for name, col in cols.items():
+        if col not in ts.columns:
+            raise ValueError(f"--test: column {col!r} (for {name}) not in {args.test}")
+    test = {name: ts.column(col) for name, col in cols.items()}
+    test["t"] = ts.t
+    scores = protocol_scores(sel, test, args.n_init)
+    m = sel.final.model
+    out = {"path": str(args.test), "n_init": args.n_init,
+           "outputs": [mapping[p] for p in m.positions],
+           "scores": {k: v.to_json() for k, v in scores.items()}}
+    if args.simulated:
+        from cdam_core.base.jsonio import write_text_atomic
+        heads, cols_out = ["t"], [ts.t]
+        for j, p in enumerate(m.positions):
+            heads.append(mapping[p])
+            cols_out.append(test[p])
+            for label, sc in scores.items():
+                if sc.status == "ok":
+                    heads.append(f"{mapping[p]}_{label}")
+                    cols_out.append(sc.prediction[:, j])
+        rows = np.column_stack(cols_out)
+        text = ",".join(heads) + "\n" + "\n".join(",".join(f"{v:.10g}" for v in r) for r in rows)
+        write_text_atomic(args.simulated, text + "\n")
+        out["simulated"] = str(args.simulated)
+    return out
 
 
 def _save(path, sel, mapping: dict, ds, args) -> dict:
     """Write the final (augmented) model as a ``greybox`` model file; returns its summary."""
     import numpy as np
     from cdam_core.models.file import save_model
-    from cdam_core.models.greybox.augmented import GreyBox
+    from cdam_core.residual.benchmark import greybox_of
     final = sel.final
     m = final.model
-    extra = [e.column for e in final.effects if getattr(e, "column", "")]
-    filt = final.signals.get("filter")
-    g = GreyBox.from_fit(final, dt=float(np.mean(np.diff(ds.t))),
-                         cutoff_hz=None if filt is None else filt.cutoff_hz,
-                         filter_order=4 if filt is None else filt.order, extra_columns=extra)
+    g = greybox_of(final, float(np.mean(np.diff(ds.t))))
+    extra = list(g.extra_columns)
     digest = save_model(path, g, inputs=[mapping[i] for i in m.inputs] + extra,
                         outputs=[mapping[p] for p in m.positions],
                         meta={"source": Path(args.data).name, "command": "cdam residual",
@@ -121,6 +165,13 @@ def register(subparsers) -> None:
     p.add_argument("--outputs", help="comma-separated output columns")
     p.add_argument("--map", help="model signal names to columns, e.g. tau=force,q=qm")
     p.add_argument("--json", help="write the JSON result here")
+    p.add_argument("--test", help="test record (dataset CSV, same columns): the declared and "
+                                  "the final model simulated open loop from its first --n-init "
+                                  "outputs (nonlinearbenchmark.org's protocol), RMSE reported")
+    p.add_argument("--n-init", type=int, default=20,
+                   help="output samples of the test record the simulation starts from "
+                        "(default 20: the EMPS benchmark's initialisation window)")
+    p.add_argument("--simulated", help="write the test record's simulated outputs (CSV)")
     p.add_argument("--save", help="write the final model (declared model + the effects found) "
                                   "as a greybox model file here (docs/MODEL_FILE.md)")
     p.add_argument("--report", help="write a Markdown report with PNG figures into this folder")
