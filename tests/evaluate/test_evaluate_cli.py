@@ -88,3 +88,14 @@ def test_named_errors(tmp_path, capsys):
     (tmp_path / "bad.json").write_text("{\"format\": \"cdam-model\"")
     assert main(["evaluate", str(tmp_path / "bad.json"), str(tmp_path / "a.csv")]) == 2
     assert "corrupt" in capsys.readouterr().err
+
+
+def test_outputs_never_overwrite_inputs(tmp_path, capsys):
+    u, y = _record(tmp_path / "a.csv", 200, 0)
+    m = ArxModel((1, 1, 1)).fit(u[:, None], y[:, None])
+    save_model(tmp_path / "m.json", m, inputs=["u"], outputs=["y"])
+    before = (tmp_path / "m.json").read_bytes()
+    assert main(["evaluate", str(tmp_path / "m.json"), str(tmp_path / "a.csv"),
+                 "--json", str(tmp_path / "m.json")]) == 2
+    assert "refusing" in capsys.readouterr().err
+    assert (tmp_path / "m.json").read_bytes() == before

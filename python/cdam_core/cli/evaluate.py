@@ -4,7 +4,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from cdam_core.cli.common import CliError, write_json
+from cdam_core.cli.common import CliError, check_io, write_json
 
 
 def register(subparsers) -> None:
@@ -35,6 +35,8 @@ def run(args) -> int:
     from cdam_core.preprocess import smooth_pair
     from cdam_core.record.dataset import read_dataset
 
+    check_io(inputs=[("MODEL", args.model)] + [("RECORD", r) for r in args.records],
+             files=[("--json", args.json)], folders=[("--report", args.report)])
     horizons = default_horizons(args.horizon) if args.horizon >= 1 else None
     if horizons is None:
         raise CliError(f"--horizon: must be >= 1, got {args.horizon}")
