@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The test command: set-up, the C++ unit tests (ctest), then every pytest test once (including
-# those marked slow, so CI runs the long soak tests exactly once).
+# those marked slow, so CI runs the long soak tests exactly once; the long fuzz campaigns,
+# marked fuzz, run by hand: pytest -m fuzz tests/robust).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
@@ -11,4 +12,4 @@ echo "== C++ unit tests (ctest)"
 (cd build/ctest && ../../.venv/bin/ctest --output-on-failure)
 echo "== Python tests (pytest)"
 # run from tests/ so that the installed cdam_core (not the source tree) is imported
-.venv/bin/python -m pytest -m "slow or not slow" -q -p no:cacheprovider "$@" tests
+.venv/bin/python -m pytest -m "not fuzz" -q -p no:cacheprovider "$@" tests
