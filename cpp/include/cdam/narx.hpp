@@ -35,7 +35,7 @@ struct NarxOrders {
     Index nr = 0;
     return (Checked<Index>(na) * n_out + Checked<Index>(nb) * n_in).get(&nr);
   }
-  int t0() const { return std::max(na, nk + nb - 1); }
+  int t0() const { return std::max(na, nk + (nb - 1)); }  // no intermediate overflow
   Index regressors(Index n_in, Index n_out) const {
     return static_cast<Index>(na) * n_out + static_cast<Index>(nb) * n_in;
   }
