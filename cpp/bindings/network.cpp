@@ -261,17 +261,20 @@ void register_network(py::module_& m) {
         "Jacobian (N m, D) of the outputs; row n m + k is d Y[n, k] / d theta.");
   m.def("mlp_jtj", &jtj, py::arg("theta"), py::arg("X"), py::arg("T"), py::arg("hidden"),
         py::arg("activation") = "tansig", py::arg("threads") = 1,
-        "(J'J, J'e, sse) accumulated in blocks without forming J; e = T - Y.");
+        "(J'J, J'e, sse) accumulated in blocks without forming J; e = T - Y. "
+        "Bit-identical for any thread count.");
   m.def("train_lm", &lm, py::arg("theta0"), py::arg("X"), py::arg("T"), py::arg("hidden"),
         py::arg("activation") = "tansig", py::kw_only(), py::arg("epochs") = 1000,
         py::arg("goal") = 0.0, py::arg("mu") = 1e-3, py::arg("mu_dec") = 0.1,
         py::arg("mu_inc") = 10.0, py::arg("mu_max") = 1e10, py::arg("min_grad") = 1e-7,
         py::arg("max_fail") = 6, py::arg("X_val") = py::none(), py::arg("T_val") = py::none(),
         py::arg("threads") = 2, py::arg("callback") = py::none(),
-        "Levenberg-Marquardt with trainlm's semantics; returns (theta, history).");
+        "Levenberg-Marquardt with trainlm's semantics; returns (theta, history). "
+        "Bit-identical for any thread count.");
   m.def("train_gd", &gd, py::arg("theta0"), py::arg("X"), py::arg("T"), py::arg("hidden"),
         py::arg("activation") = "tansig", py::kw_only(), py::arg("lr") = 0.01,
         py::arg("epochs") = 1000, py::arg("goal") = 0.0, py::arg("threads") = 2,
         py::arg("callback") = py::none(),
-        "Plain batch gradient-descent BP on the MSE; returns (theta, history).");
+        "Plain batch gradient-descent BP on the MSE; returns (theta, history). "
+        "Bit-identical for any thread count.");
 }

@@ -48,7 +48,7 @@ def mlp_jacobian(theta: numpy.ndarray, X: numpy.ndarray, hidden: typing.Supports
     """
 def mlp_jtj(theta: numpy.ndarray, X: numpy.ndarray, T: numpy.ndarray, hidden: typing.SupportsInt | typing.SupportsIndex, activation: str = 'tansig', threads: typing.SupportsInt | typing.SupportsIndex = 1) -> tuple:
     """
-    (J'J, J'e, sse) accumulated in blocks without forming J; e = T - Y.
+    (J'J, J'e, sse) accumulated in blocks without forming J; e = T - Y. Bit-identical for any thread count.
     """
 def mlp_mse_gradient(theta: numpy.ndarray, X: numpy.ndarray, T: numpy.ndarray, hidden: typing.SupportsInt | typing.SupportsIndex, activation: str = 'tansig') -> tuple:
     """
@@ -90,11 +90,11 @@ def sim_substeps(plant: numpy.ndarray, dt: typing.SupportsFloat | typing.Support
     """
 def train_gd(theta0: numpy.ndarray, X: numpy.ndarray, T: numpy.ndarray, hidden: typing.SupportsInt | typing.SupportsIndex, activation: str = 'tansig', *, lr: typing.SupportsFloat | typing.SupportsIndex = 0.01, epochs: typing.SupportsInt | typing.SupportsIndex = 1000, goal: typing.SupportsFloat | typing.SupportsIndex = 0.0, threads: typing.SupportsInt | typing.SupportsIndex = 2, callback: typing.Any = None) -> tuple:
     """
-    Plain batch gradient-descent BP on the MSE; returns (theta, history).
+    Plain batch gradient-descent BP on the MSE; returns (theta, history). Bit-identical for any thread count.
     """
 def train_lm(theta0: numpy.ndarray, X: numpy.ndarray, T: numpy.ndarray, hidden: typing.SupportsInt | typing.SupportsIndex, activation: str = 'tansig', *, epochs: typing.SupportsInt | typing.SupportsIndex = 1000, goal: typing.SupportsFloat | typing.SupportsIndex = 0.0, mu: typing.SupportsFloat | typing.SupportsIndex = 0.001, mu_dec: typing.SupportsFloat | typing.SupportsIndex = 0.1, mu_inc: typing.SupportsFloat | typing.SupportsIndex = 10.0, mu_max: typing.SupportsFloat | typing.SupportsIndex = 10000000000.0, min_grad: typing.SupportsFloat | typing.SupportsIndex = 1e-07, max_fail: typing.SupportsInt | typing.SupportsIndex = 6, X_val: typing.Any = None, T_val: typing.Any = None, threads: typing.SupportsInt | typing.SupportsIndex = 2, callback: typing.Any = None) -> tuple:
     """
-    Levenberg-Marquardt with trainlm's semantics; returns (theta, history).
+    Levenberg-Marquardt with trainlm's semantics; returns (theta, history). Bit-identical for any thread count.
     """
 SIM_CONTROL_SIZE: int = 26
 SIM_NLOG: int = 10

@@ -28,8 +28,8 @@ struct TrainHistory {
 using EpochCallback = std::function<bool(int, double)>;
 
 // The host policy of lm_train: J'e and J'J from NormalEquations (blocks, no J formed, `threads`
-// workers), (J'J + mu I) d = J'e by Eigen's LLT; an optional validation set. The constructor is
-// the one place that allocates.
+// workers over fixed chunks, the same bits for any thread count), (J'J + mu I) d = J'e by
+// Eigen's LLT; an optional validation set. The constructor is the one place that allocates.
 template <typename Scalar_>
 class LmDynamic {
  public:
