@@ -88,10 +88,13 @@ py::array simulate(const py::array& theta, const py::array& U, const py::array& 
     }
     std::vector<T> reg(net.inputs()), hid(hidden);
     Status s;
+    SignalPoll poll(256);
     {
       py::gil_scoped_release nogil;
-      s = narx_simulate(net, th.data(), u.data(), yp, n, ni, o, reg.data(), hid.data());
+      s = narx_simulate(net, th.data(), u.data(), yp, n, ni, o, reg.data(), hid.data(),
+                        poll.hook());
     }
+    poll.raise_if_interrupted();
     check_status(s, "narx_simulate");
     return Y;
   });

@@ -86,10 +86,13 @@ void register_sim(py::module_& m) {
         cdam::bind::alloc_elements<double>((cdam::Checked<cdam::Index>(n) + 1) * kNx, "U");
         py::array_t<double> X({n + 1, static_cast<long>(kNx)});
         cdam::Status s;
+        cdam::bind::SignalPoll poll(64);
         {
           py::gil_scoped_release nogil;
-          s = simulate_open_loop(p, xv.data(), Uv.data(), n, dt, substeps, X.mutable_data());
+          s = simulate_open_loop(p, xv.data(), Uv.data(), n, dt, substeps, X.mutable_data(),
+                                 poll.hook());
         }
+        poll.raise_if_interrupted();
         check_run(s, "sim_open_loop");
         return X;
       }, py::arg("plant"), py::arg("x0"), py::arg("U"), py::arg("dt"), py::arg("substeps"),
@@ -106,11 +109,13 @@ void register_sim(py::module_& m) {
         py::array_t<double> X({n, static_cast<long>(kNx)});
         py::array_t<double> LOG({n, static_cast<long>(kNlog)});
         cdam::Status s;
+        cdam::bind::SignalPoll poll(64);
         {
           py::gil_scoped_release nogil;
           s = simulate_closed_loop(p, c, xv.data(), SPv.data(), n, dt, substeps, X.mutable_data(),
-                                   LOG.mutable_data());
+                                   LOG.mutable_data(), poll.hook());
         }
+        poll.raise_if_interrupted();
         check_run(s, "sim_closed_loop");
         return py::make_tuple(X, LOG);
       }, py::arg("plant"), py::arg("control"), py::arg("x0"), py::arg("setpoints"), py::arg("dt"),

@@ -18,6 +18,11 @@ NET = ("rng = np.random.default_rng(0)\n"
        "th = rng.uniform(-0.5, 0.5, _core.mlp_num_params(6, 20, 8))\n")
 
 
+SIM = ("from cdam_core.sim.parameters import control_vector, plant_vector\n"
+       "from cdam_core.sim.state import hover_state\n"
+       "P, C = plant_vector(), control_vector()\n")
+
+
 @pytest.mark.parametrize("expr, setup", [
     # 2**31 - 1 passes over 10 samples: about a minute of work
     ("_core.five_point_cubic_smooth(np.ones(10), 2**31 - 1)", ""),
@@ -29,6 +34,13 @@ NET = ("rng = np.random.default_rng(0)\n"
     # 2 * 10**7 BOA iterations of 20 sphere evaluations
     ("_core.optimise('boa', 'sphere', dim=4, options={'iterations': 2 * 10**7})", ""),
     ("_core.optimise('cabc', 'sphere', dim=4, options={'iterations': 2 * 10**7})", ""),
+    # the simulator at its largest sub-step count: 10**9 RK4 steps in the open loop, 2.5 10**8
+    # in the closed loop (minutes); a wide NARX network run over 10**7 samples (tens of seconds)
+    ("_core.sim_open_loop(P, hover_state(), np.zeros((10**6, 6)), 1e-3, 1000)", SIM),
+    ("_core.sim_closed_loop(P, C, hover_state(), np.tile(hover_state()[[0, 1, 2, 3, 4, 5, 6, 7]],"
+     " (2 * 10**5, 1)), 1e-3, 1000)", SIM),
+    ("_core.narx_simulate(np.full(_core.mlp_num_params(2, 2000, 1), 0.01), np.zeros((10**7, 1)), "
+     "np.zeros((1, 1)), 2000, 'tansig', 1, 1, 1)", ""),
 ])
 def test_sigint_stops_a_long_native_loop(expr, setup):
     res = interrupt_call(expr, setup=setup, delay=1.0, grace=GRACE)

@@ -67,10 +67,11 @@ Status narx_regressors(const Scalar* U, Index ni, const Scalar* Y, Index no, Ind
 
 // Free-run simulation: Y (m x n) holds the initial outputs in its first t0 columns; columns
 // t0 .. n-1 are overwritten with the simulated outputs. reg: na m + nb i scalars, hidden: h.
-template <typename Scalar, int I, int H, int O>
+// `poll` (status.hpp) is asked every step; false ends the run with Status::Cancelled.
+template <typename Scalar, int I, int H, int O, typename Poll = NeverCancel>
 Status narx_simulate(const Mlp<Scalar, I, H, O>& net, const Scalar* theta, const Scalar* U,
                      Scalar* Y, Index n, Index ni, const NarxOrders& o, Scalar* reg,
-                     Scalar* hidden) {
+                     Scalar* hidden, Poll poll = Poll()) {
   const Index no = net.outputs();
   const Status st = o.check(ni, no);
   if (st != Status::Ok) return st;
@@ -78,6 +79,7 @@ Status narx_simulate(const Mlp<Scalar, I, H, O>& net, const Scalar* theta, const
   const Index t0 = o.t0();
   if (n <= t0) return Status::TooFewSamples;
   for (Index t = t0; t < n; ++t) {
+    if (!poll()) return Status::Cancelled;
     narx_regressor(U, ni, Y, no, o, t, reg);
     net.forward(theta, reg, hidden, Y + t * no);
   }

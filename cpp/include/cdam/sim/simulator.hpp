@@ -61,9 +61,10 @@ inline Status check_plant(const PlantParams& p) {
 
 // Open loop: states (kNx x (n+1), column-major, column k = x at t = k dt) from x0 under inputs
 // U (kNu x n), each held over one dt split into `substeps` RK4 steps; the quaternion is
-// renormalised after each dt.
+// renormalised after each dt. `poll` (status.hpp) is asked every tick; false: Cancelled.
+template <typename Poll = NeverCancel>
 inline Status simulate_open_loop(const PlantParams& p, const double* x0, const double* U, long n,
-                                 double dt, int substeps, double* X) {
+                                 double dt, int substeps, double* X, Poll poll = Poll()) {
   if (n < 0 || !(dt > 0) || substeps < 1) return Status::InvalidArgument;
   State x = Eigen::Map<const State>(x0);
   Eigen::Map<State> x_first(X);
@@ -72,6 +73,7 @@ inline Status simulate_open_loop(const PlantParams& p, const double* x0, const d
   Input u;
   auto f = [&](double t, const State& xs, State& dx) { rhs(p, t, xs, u, dx); };
   for (long k = 0; k < n; ++k) {
+    if (!poll()) return Status::Cancelled;
     u = Eigen::Map<const Input>(U + k * kNu);
     const double t = k * dt;
     for (int j = 0; j < substeps; ++j) rk4_step<kNx>(f, t + j * h, x, h);
@@ -86,10 +88,11 @@ inline Status simulate_open_loop(const PlantParams& p, const double* x0, const d
 // Closed loop: setpoints SP (kNsp x n); writes states X (kNx x n, the state at each tick) and
 // LOG (kNlog x n: the commanded T, tau_phi, tau_theta, tau_psi from the clamped rotor speeds by
 // the nominal eq. (2), tau_m1, tau_m2, O1..O4). Commands are held over the tick (zero-order
-// hold) and applied delay_rotor / delay_joint ticks late.
+// hold) and applied delay_rotor / delay_joint ticks late. `poll` as in simulate_open_loop.
+template <typename Poll = NeverCancel>
 inline Status simulate_closed_loop(const PlantParams& p, const ControlParams& c, const double* x0,
                                    const double* SP, long n, double dt, int substeps, double* X,
-                                   double* LOG) {
+                                   double* LOG, Poll poll = Poll()) {
   if (n < 1 || !(dt > 0) || substeps < 1) return Status::InvalidArgument;
   if (!(c.delay_rotor >= 0 && c.delay_rotor <= kMaxDelay && c.delay_joint >= 0 &&
         c.delay_joint <= kMaxDelay))
@@ -106,6 +109,7 @@ inline Status simulate_closed_loop(const PlantParams& p, const ControlParams& c,
   Input u;
   auto f = [&](double t, const State& xs, State& dx) { rhs(p, t, xs, u, dx); };
   for (long k = 0; k < n; ++k) {
+    if (!poll()) return Status::Cancelled;
     Eigen::Map<State> x_out(X + k * kNx);
     x_out = x;
     const Setpoint sp = Eigen::Map<const Setpoint>(SP + k * kNsp);
