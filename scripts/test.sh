@@ -10,13 +10,8 @@ echo "== C++ unit tests (ctest)"
   || { cat build/ctest.log; exit 1; }
 .venv/bin/cmake --build build/ctest -j2 >> build/ctest.log 2>&1 || { cat build/ctest.log; exit 1; }
 (cd build/ctest && ../../.venv/bin/ctest --output-on-failure)
-echo "== C++ unit tests under AddressSanitizer + UBSan"
-.venv/bin/cmake -S . -B build/sanitize -G Ninja -DCDAM_PYTHON=OFF -DCDAM_TESTS=ON \
-  -DCDAM_SANITIZE=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo > build/sanitize.log 2>&1 \
-  || { cat build/sanitize.log; exit 1; }
-.venv/bin/cmake --build build/sanitize -j2 --target cdam_tests >> build/sanitize.log 2>&1 \
-  || { cat build/sanitize.log; exit 1; }
-build/sanitize/cpp/tests/cdam_tests
+echo "== C++ unit tests and a hypothesis pass over _core under AddressSanitizer + UBSan"
+bash scripts/sanitize.sh
 echo "== Python tests (pytest)"
 # run from tests/ so that the installed cdam_core (not the source tree) is imported
 .venv/bin/python -m pytest -m "not fuzz" -q -p no:cacheprovider "$@" tests

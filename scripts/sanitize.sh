@@ -1,0 +1,19 @@
+#!/usr/bin/env bash
+# The core under AddressSanitizer + UBSan: the C++ unit tests, then a hypothesis pass over every
+# _core binding (tests/robust/_fuzz_core_child.py) with the sanitized extension loaded into the
+# venv's Python (libasan and libstdc++ preloaded, so that ASan intercepts C++ throws; leak checks off: CPython itself does not free everything).
+# Part of scripts/test.sh; EXAMPLES (default 60) sets the hypothesis budget.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+.venv/bin/cmake -S . -B build/sanitize -G Ninja -DCDAM_PYTHON=ON -DCDAM_TESTS=ON \
+  -DCDAM_SANITIZE=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+  -DPython_EXECUTABLE="$PWD/.venv/bin/python" > build/sanitize.log 2>&1 \
+  || { cat build/sanitize.log; exit 1; }
+.venv/bin/cmake --build build/sanitize -j2 --target cdam_tests _core >> build/sanitize.log 2>&1 \
+  || { cat build/sanitize.log; exit 1; }
+build/sanitize/cpp/tests/cdam_tests
+LD_PRELOAD="$(gcc -print-file-name=libasan.so) $(gcc -print-file-name=libstdc++.so)" \
+  ASAN_OPTIONS=detect_leaks=0 \
+  UBSAN_OPTIONS=print_stacktrace=1 CDAM_CORE_EXT_DIR="$PWD/build/sanitize/cdam_core" \
+  PYTHONPATH="$PWD/python" .venv/bin/python tests/robust/_fuzz_core_child.py "${EXAMPLES:-60}" \
+  | tail -n 1
