@@ -115,3 +115,26 @@ def test_cli_test_record_under_the_simulation_protocol(tmp_path):
     assert main(["residual", str(tmp_path / "a.csv"), "--model", "rigid_axis", "--map",
                  "tau=force,q=pos", "--test", str(tmp_path / "a.csv"), "--simulated",
                  str(tmp_path / "a.csv")]) != 0     # never over an input
+
+
+def test_cli_never_loses_the_analysis(tmp_path):
+    """A record no passive axis explains (the force opposes the acceleration: a negative
+    inertia, bounded to zero, so the model cannot be simulated): the free run is reported
+    unavailable with its reason, the JSON and report are still written, exit code 1."""
+    rng = np.random.default_rng(0)
+    t = np.arange(3000) * 1e-3
+    q = 0.2 * np.sin(2 * np.pi * 1.1 * t) + 0.05 * np.sin(2 * np.pi * 3.7 * t)
+    tau = -2.0 * np.gradient(np.gradient(q, 1e-3), 1e-3) + 0.01 * rng.standard_normal(t.size)
+    np.savetxt(tmp_path / "r.csv", np.column_stack([t, tau, q]), delimiter=",",
+               header="t,force,pos", comments="", fmt="%.10g")
+    rc = main(["residual", str(tmp_path / "r.csv"), "--model", "rigid_axis", "--map",
+               "tau=force,q=pos", "--json", str(tmp_path / "o.json"), "--report",
+               str(tmp_path / "rep")])
+    js = json.loads((tmp_path / "o.json").read_text())
+    fr = js["declared_error"]["q"]
+    assert fr["status"] == "unavailable" and fr["reason"]
+    assert js["complete"] is False and rc == 1
+    assert (tmp_path / "rep" / "index.md").is_file()
+    assert "tau" in js["declared_error"] and js["declared_error"]["tau"]["rmse"] > 0
+    assert "M" in js["feasibility"]["declared"]["violations"]
+    assert js["feasibility"]["declared"]["unconstrained"]["M"] == pytest.approx(-2.0, rel=0.05)

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import sys
 import math
 from pathlib import Path
 
@@ -96,6 +97,10 @@ def run(args) -> int:
             print(f"test simulation ({label} model): " + (
                 ", ".join(f"{o} rmse {v:.4g}" for o, v in zip(js["test"]["outputs"], sc["rmse"]))
                 if sc["status"] == "ok" else f"{sc['status']}: {sc['reason']}"))
+    if not js.get("complete", True):
+        print("cdam residual: analysis incomplete: a free run could not be computed (see "
+              "'unavailable' in the JSON); everything else was written", file=sys.stderr)
+        return 1
     return 0
 
 

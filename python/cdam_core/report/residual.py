@@ -45,12 +45,35 @@ def to_json(sel: Selection) -> dict:
         "removed_in_backward_pass": sel.removed,
         "declared_parameters": sel.declared.theta,
         "final_parameters": sel.final.theta,
+        "declared_std": sel.declared.std,
+        "final_std": sel.final.std,
+        "feasibility": {k: {"feasible": not f.violations, "violations": f.violations,
+                            "unconstrained": f.unconstrained,
+                            "bounds": {p: list(b) for p, b in _bounds(f).items()}}
+                        for k, f in (("declared", sel.declared), ("final", sel.final))},
+        "complete": _complete(sel),
         "settings": settings,
     })
 
 
+def _bounds(f) -> dict:
+    out = dict(getattr(f.model, "bounds", {}) or {})
+    for e in f.effects:
+        out.update(e.bounds())
+    return {p: b for p, b in out.items() if p in f.theta}
+
+
+def _complete(sel: Selection) -> bool:
+    """False when a part of the analysis (a free run) could not be computed."""
+    errs = [sel.declared_error, sel.final_error] + [s.error_before for s in sel.steps] + \
+        [s.error_after for s in sel.steps]
+    return not any(isinstance(v, dict) and v.get("status") == "unavailable"
+                   for e in errs for v in (e or {}).values())
+
+
 def _fmt_err(err: dict) -> str:
-    return "; ".join(f"{k}: RMSE {v['rmse']:.4g}, NRMSE {100 * v['nrmse']:.2f} %"
+    return "; ".join(f"{k}: free run unavailable ({v['reason']})" if v.get("status") else
+                     f"{k}: RMSE {v['rmse']:.4g}, NRMSE {100 * v['nrmse']:.2f} %"
                      for k, v in err.items())
 
 

@@ -167,7 +167,14 @@ def _requirements_met(eff, effects) -> bool:
 def _errors(f: Fit, sig_fr, free_run: bool, substeps, store=None, label=""):
     out = dict(f.equation_error())
     if free_run:
-        fr, sim = free_run_error(f, sig_fr, substeps)
+        try:
+            fr, sim = free_run_error(f, sig_fr, substeps)
+        except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
+            # never lose the rest of the analysis: the free run is reported with its reason
+            why = {"rmse": float("nan"), "nrmse": float("nan"), "status": "unavailable",
+                   "reason": str(exc)}
+            out.update({(p + "_sim" if p in out else p): dict(why) for p in f.model.positions})
+            return out
         # a position named like an equation (X, Y, Z of the flight models) gets "_sim"
         out.update({(k + "_sim" if k in out else k): v for k, v in fr.items()})
         if store is not None:

@@ -16,6 +16,8 @@ from scipy import signal as sps
 
 from cdam_core.base.signals import as_signal, as_time, positive
 
+INF = float("inf")
+
 
 @lru_cache(maxsize=64)
 def _butter(order: int, cutoff: float, fs: float) -> np.ndarray:
@@ -88,6 +90,9 @@ class GreyBoxModel:
     viscous: dict[str, tuple[str, str]] = {}   # equation -> (viscous parameter, velocity signal)
     offset: dict[str, str] = {}                # equation -> constant parameter, if any
     defaults: dict[str, str] = {}              # signal -> default dataset column
+    # physical bounds (documented facts: inertias, stiffnesses and dampings are not negative);
+    # an estimate outside them is refitted with the bounds and both are reported (estimation.fit)
+    bounds: dict[str, tuple[float, float]] = {}
     cables: dict = {}     # link equation -> (motor equation, deflection, its rate, stiffness)
     parallel_filter = False   # also low-pass both sides of every equation (flight models)
     default_cutoff_hz = 100.0
@@ -165,6 +170,7 @@ class RigidAxis(GreyBoxModel):
     positions = ("q",)
     equation_names = ("tau",)
     parameter_names = ("M", "Fv", "offset")
+    bounds = {"M": (0.0, INF), "Fv": (0.0, INF)}
     viscous = {"tau": ("Fv", "q_d")}
     offset = {"tau": "offset"}
     defaults = {"tau": "tau", "q": "q"}
@@ -190,6 +196,7 @@ class FlexibleJoint(GreyBoxModel):
     positions = ("theta_m", "q")
     equation_names = ("tau_m", "tau_l")
     parameter_names = ("Im", "Dm", "Ks", "Kd", "I", "Dl", "G")
+    bounds = {p: (0.0, INF) for p in ("Im", "Dm", "Ks", "Kd", "I", "Dl")}
     viscous = {"tau_m": ("Dm", "theta_m_d"), "tau_l": ("Dl", "q_d")}
     offset = {}
     defaults = {"tau_m": "tau_m1", "theta_m": "theta_m1", "q": "q1"}

@@ -65,6 +65,10 @@ class Effect:
             out[self.search[0]] = float(getattr(self, self.search[0]))
         return out
 
+    def bounds(self) -> dict:
+        """Physical bounds of the effect's linear parameters: ``{full name: (lo, hi)}``."""
+        return {}
+
     def display_equation(self, equations) -> str:
         """The equation (of ``equations``) on which the report shows the effect."""
         return self.channel if self.channel in equations else next(iter(equations))
@@ -112,6 +116,9 @@ class CoulombFriction(Effect):
     def regressors(self, s, model):
         v = s[model.viscous[self.channel][1]]
         return {self.channel: {_p(self, "Fc"): smooth_sign(v, self.eps)}}
+
+    def bounds(self) -> dict:
+        return {_p(self, "Fc"): (0.0, float("inf"))}   # dry friction opposes the motion
 
     def parameters(self, theta, model):
         out = super().parameters(theta, model)

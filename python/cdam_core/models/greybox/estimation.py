@@ -88,6 +88,10 @@ class Fit:
     columns: dict = field(default_factory=dict)   # equation -> estimated parameters in it
     weights: dict = field(default_factory=dict)   # equation -> WLS weight (missing: 1)
     std: dict = field(default_factory=dict)       # estimated parameter -> standard deviation
+    # physical feasibility: parameters whose unconstrained estimate broke the model's bounds
+    # (then refitted with the bounds: ``unconstrained`` holds the first estimates)
+    violations: list = field(default_factory=list)
+    unconstrained: dict = field(default_factory=dict)
 
     def wsse(self, equations=None) -> float:
         """Weighted sum of squared residuals over ``equations`` (default: all)."""
@@ -178,6 +182,10 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None)
     # well conditioned.
     theta = dict(model.fixed)
     resid, conds, std = {}, [], {}
+    violations, unconstrained = [], {}
+    bounds = dict(getattr(model, "bounds", {}) or {})
+    for e in effects:
+        bounds.update(e.bounds())
     for comp in _components(eqs, est):
         if (sigs is not None and bsigs is not None and base.keep == keep
                 and all(bsigs.get(eq) == sigs[eq] for eq in comp)):
@@ -187,6 +195,9 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None)
                     theta[p] = base.theta[p]
                     if p in base.std:
                         std[p] = base.std[p]
+                    if p in base.unconstrained:
+                        unconstrained[p] = base.unconstrained[p]
+                        violations.append(p)
             continue
         ps_all = [p for p in est if any(p in eqs[eq][1] for eq in comp)]
         index = {p: j for j, p in enumerate(ps_all)}
@@ -215,6 +226,13 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None)
         scale[scale == 0] = 1.0
         As = A / np.outer(scale, scale)
         th = np.linalg.lstsq(As, b / scale, rcond=None)[0] / scale if k else np.zeros(0)
+        lo = np.array([bounds.get(p, (-np.inf, np.inf))[0] for p in ps_all])
+        hi = np.array([bounds.get(p, (-np.inf, np.inf))[1] for p in ps_all])
+        bad = [p for j, p in enumerate(ps_all) if not lo[j] <= th[j] <= hi[j]]
+        if bad:   # refit this block with the physical bounds (bounded linear least squares)
+            unconstrained.update({p: float(th[index[p]]) for p in bad})
+            violations += bad
+            th = _bounded(blocks, weights, k, scale, lo, hi)
         if k:
             sv = np.sqrt(np.maximum(np.linalg.eigvalsh(As)[::-1], 0.0))
             conds.append(float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf"))
@@ -225,13 +243,33 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None)
             wsse += weights.get(eq, 1.0) ** 2 * float(resid[eq] @ resid[eq])
             rows += y.size
         std.update(_std(As, scale, wsse, rows, ps_all))
+        for j, p in enumerate(ps_all):   # at an active bound the covariance formula does not hold
+            if bad and (th[j] <= lo[j] or th[j] >= hi[j]):
+                std[p] = float("nan")
     if base is not None and len(conds) < len(_components(eqs, est)):
         conds.append(base.cond)
     resid = {eq: resid[eq] for eq in eqs}
     refs = {eq: _reference(model, eq, s, theta, eqs[eq][0], n, keep) for eq in eqs}
     return Fit(model, effects, theta, est, resid, refs, s, keep, max(conds) if conds else 1.0,
                {eq: [p for p in cols if p in est] for eq, (_, cols) in eqs.items()}, weights,
-               std)
+               std, violations, unconstrained)
+
+
+def _bounded(blocks, weights, k, scale, lo, hi) -> np.ndarray:
+    """Weighted least squares of one block with bounds (scipy.optimize.lsq_linear on the
+    column-scaled rows)."""
+    from scipy.optimize import lsq_linear
+    rows = []
+    rhs = []
+    for eq, y, X, ix in blocks:
+        w = weights.get(eq, 1.0)
+        A = np.zeros((y.size, k))
+        A[:, ix] = w * X / scale[ix]
+        rows.append(A)
+        rhs.append(w * y)
+    res = lsq_linear(np.vstack(rows), np.concatenate(rhs), bounds=(lo * scale, hi * scale),
+                     method="bvls")
+    return res.x / scale
 
 
 def _std(As: np.ndarray, scale: np.ndarray, wsse: float, rows: int, names: list) -> dict:
@@ -425,4 +463,4 @@ def apply_fit(fitted: Fit, sig: dict, trim: int | None = None) -> Fit:
         refs[eq] = _reference(model, eq, s, fitted.theta, y, n, keep)
     return Fit(model, fitted.effects, dict(fitted.theta), list(fitted.estimated), resid, refs, s,
                keep, fitted.cond, dict(fitted.columns), dict(fitted.weights),
-               dict(fitted.std))
+               dict(fitted.std), list(fitted.violations), dict(fitted.unconstrained))

@@ -78,6 +78,7 @@ class Quadrotor(GreyBoxModel):
     positions = QUAD_POSITIONS
     equation_names = ("X", "Y", "Z", "tau_phi", "tau_theta", "tau_psi")
     parameter_names = ("m", "Kx", "Ky", "Kz", "Jx", "Jy", "Jz", "Kphi", "Ktheta", "Kpsi")
+    bounds = {p: (0.0, float("inf")) for p in parameter_names}
     viscous = {}
     offset = {}
     cables = {}
@@ -174,6 +175,8 @@ class AerialManipulator(Quadrotor):
     parameter_names = Quadrotor.parameter_names + (
         "Im1", "Dm1", "Ks1", "Kd1", "Im2", "Dm2", "Ks2", "Kd2", "p1", "p2", "p3", "g1", "g2",
         "Dl1", "Dl2")
+    bounds = {**Quadrotor.bounds, **{p: (0.0, float("inf")) for p in (
+        "Im1", "Dm1", "Ks1", "Kd1", "Im2", "Dm2", "Ks2", "Kd2", "Dl1", "Dl2")}}
     viscous = {"tau_m1": ("Dm1", "theta_m1_d"), "tau_m2": ("Dm2", "theta_m2_d"),
                "tau_l1": ("Dl1", "q1_d"), "tau_l2": ("Dl2", "q2_d")}
     # link equation -> (motor equation, deflection, deflection rate, stiffness parameter)
