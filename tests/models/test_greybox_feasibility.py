@@ -26,7 +26,9 @@ def test_negative_damping_is_refitted_with_bounds():
     t, q, tau = _record(fv=-0.5)                 # an "active" axis: no passive model fits it
     m = get_model("rigid_axis")
     sig = m.prepare(t, {"tau": tau, "q": q})
-    f = fit(m, sig)
+    free = fit(m, sig)                           # structure searches: unconstrained, flagged
+    assert free.violations == ["Fv"] and free.theta["Fv"] == free.unconstrained["Fv"]
+    f = fit(m, sig, bounded=True)
     assert f.violations == ["Fv"]
     assert f.unconstrained["Fv"] == pytest.approx(-0.5, abs=0.02)
     assert f.theta["Fv"] == 0.0 and np.isnan(f.std["Fv"])
@@ -49,6 +51,6 @@ def test_feasible_estimates_are_left_alone():
 def test_negative_dry_friction_is_refused():
     t, q, tau = _record(fv=0.5, fc=-0.3)
     m = get_model("rigid_axis")
-    f = fit(m, m.prepare(t, {"tau": tau, "q": q}), (CoulombFriction("tau"),))
+    f = fit(m, m.prepare(t, {"tau": tau, "q": q}), (CoulombFriction("tau"),), bounded=True)
     assert f.violations == ["coulomb_friction@tau.Fc"]
     assert f.theta["coulomb_friction@tau.Fc"] == 0.0

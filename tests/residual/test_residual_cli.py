@@ -119,8 +119,9 @@ def test_cli_test_record_under_the_simulation_protocol(tmp_path):
 
 def test_cli_never_loses_the_analysis(tmp_path):
     """A record no passive axis explains (the force opposes the acceleration: a negative
-    inertia, bounded to zero, so the model cannot be simulated): the free run is reported
-    unavailable with its reason, the JSON and report are still written, exit code 1."""
+    inertia; the final model, refitted with the bounds, has none and cannot be simulated):
+    its free run is reported unavailable with its reason, the JSON and report are still
+    written, exit code 1."""
     rng = np.random.default_rng(0)
     t = np.arange(3000) * 1e-3
     q = 0.2 * np.sin(2 * np.pi * 1.1 * t) + 0.05 * np.sin(2 * np.pi * 3.7 * t)
@@ -131,7 +132,7 @@ def test_cli_never_loses_the_analysis(tmp_path):
                "tau=force,q=pos", "--json", str(tmp_path / "o.json"), "--report",
                str(tmp_path / "rep")])
     js = json.loads((tmp_path / "o.json").read_text())
-    fr = js["declared_error"]["q"]
+    fr = js["error_final"]["q"]
     assert fr["status"] == "unavailable" and fr["reason"]
     assert js["complete"] is False and rc == 1
     assert (tmp_path / "rep" / "index.md").is_file()

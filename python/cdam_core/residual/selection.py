@@ -296,6 +296,9 @@ def select(model, sig: dict, candidates, alpha: float = 0.01, max_steps: int | N
                  not in gone]
     final_error = _errors(current, sig_fr, free_run, substeps, store, "final") if removed \
         else dict(err_current)
+    if current.violations:   # the model handed on is refitted with the physical bounds
+        current = fit(model, sig, current.effects, trim, bounded=True)
+        final_error = _errors(current, sig_fr, free_run, substeps, store, "final")
     white = all(dg.whiteness(r, lags)["white"] for r in current.residuals.values())
     unexplained = []
     # above the derivative filter's band the equation error holds only the unfiltered

@@ -134,7 +134,7 @@ class GreyBox(Model):
         t = np.arange(U.shape[0]) * float(self.dt)
         raw, extra = self._signals(m, U, Y)
         sig = m.prepare(t, raw, self._filter(m), extra or None)
-        f = idim_fit(m, sig, self.effects)
+        f = idim_fit(m, sig, self.effects, bounded=True)
         self._set(m, f.theta, f.std, f.estimated, U.shape[1], Y.shape[1])
 
     @classmethod

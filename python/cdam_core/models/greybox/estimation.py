@@ -152,8 +152,16 @@ def _components(eqs: dict, est: list) -> list:
     return list(groups.values())
 
 
-def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None) -> Fit:
+def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None,
+        bounded: bool = False) -> Fit:
     """Estimate the parameters of ``model`` with ``effects`` by linear least squares.
+
+    Estimates outside the physical bounds of the model and its effects (``bounds``) are
+    listed in :attr:`Fit.violations` (with the estimates in :attr:`Fit.unconstrained`); with
+    ``bounded`` the blocks holding them are refitted by bounded least squares. Structure
+    searches compare unconstrained fits (a bound would bend the search landscape near a
+    parameter whose true value is at its bound, as a motor damping of nearly zero is); the
+    model handed to users is the bounded refit.
 
     Equations that share no estimated parameter are independent least-squares blocks; with
     ``base`` (an earlier fit on the same record) a block whose equations are unchanged (same
@@ -175,6 +183,8 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None)
     weights = dict(getattr(sig, "weights", None) or {})
     if base is not None and base.weights != weights:
         base = None
+    if base is not None and bounded and base.violations:
+        base = None   # its blocks were solved without the bounds
     bsigs = getattr(base.signals, "signatures", None) if base is not None else None
     # Normal equations per block, assembled equation by equation (each equation holds only
     # its own columns), formed with einsum (single-threaded: on a busy machine a threaded BLAS
@@ -228,10 +238,14 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None)
         th = np.linalg.lstsq(As, b / scale, rcond=None)[0] / scale if k else np.zeros(0)
         lo = np.array([bounds.get(p, (-np.inf, np.inf))[0] for p in ps_all])
         hi = np.array([bounds.get(p, (-np.inf, np.inf))[1] for p in ps_all])
-        bad = [p for j, p in enumerate(ps_all) if not lo[j] <= th[j] <= hi[j]]
-        if bad:   # refit this block with the physical bounds (bounded linear least squares)
-            unconstrained.update({p: float(th[index[p]]) for p in bad})
-            violations += bad
+        # a violation counts beyond rounding: in the unit-norm column scaling, further outside
+        # the bound than 1e-9 of the block's largest scaled estimate
+        tol = 1e-9 * float(np.max(np.abs(th * scale))) if k else 0.0
+        bad = [p for j, p in enumerate(ps_all)
+               if (lo[j] - th[j]) * scale[j] > tol or (th[j] - hi[j]) * scale[j] > tol]
+        unconstrained.update({p: float(th[index[p]]) for p in bad})
+        violations += bad
+        if bad and bounded:   # refit this block with the bounds (bounded linear least squares)
             th = _bounded(blocks, weights, k, scale, lo, hi)
         if k:
             sv = np.sqrt(np.maximum(np.linalg.eigvalsh(As)[::-1], 0.0))
@@ -244,7 +258,7 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None)
             rows += y.size
         std.update(_std(As, scale, wsse, rows, ps_all))
         for j, p in enumerate(ps_all):   # at an active bound the covariance formula does not hold
-            if bad and (th[j] <= lo[j] or th[j] >= hi[j]):
+            if bad and bounded and (th[j] <= lo[j] or th[j] >= hi[j]):
                 std[p] = float("nan")
     if base is not None and len(conds) < len(_components(eqs, est)):
         conds.append(base.cond)
