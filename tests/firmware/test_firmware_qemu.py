@@ -67,6 +67,9 @@ def test_equivalence_and_cost_on_1000_recorded_vectors(flight_model, built):
     assert res["vectors"] == 1000
     assert res["max_abs_error"] <= 1e-5
     assert 300 < res["instructions_per_inference"] <= 1500
+    from cdam_core.firmware import sandbox
+    if sandbox.available() is None:   # the run saw only the image and its work folder
+        assert res["sandbox"].startswith("private root"), res["sandbox"]
 
 
 def test_sizes_and_heap_guard(built):

@@ -124,3 +124,25 @@ def test_resample_kinds_against_independent_formulas():
         resample(t, np.r_[x[:4], np.nan], g)
     with pytest.raises(ValueError, match="rate"):
         uniform_grid(0, 1, 0)
+
+
+def test_a_joints_dropout_stays_a_gap():
+    """0.3 s without joint samples: no merged sample inside it (flight time), the joint
+    columns elsewhere follow the true signal (cos t of the joints clock), no ramp across."""
+    flight, joints = _records(0, 0.5, 0.0)
+    lo, hi = 20.0, 20.3                                # joints clock
+    keep = (joints.t < lo) | (joints.t > hi)
+    joints = Dataset(t=joints.t[keep], columns=joints.columns, data=joints.data[keep],
+                     meta=joints.meta)
+    merged, est = merge_records(flight, joints, pair=("phi", "theta_m1"))
+    gap = (lo + est.offset, hi + est.offset)         # in flight time
+    inside = (merged.t > gap[0] + 2e-3) & (merged.t < gap[1] - 2e-3)
+    assert not inside.any()
+    rows = merged.meta["gapless_rows"]
+    assert len(rows) == 2 and rows[0][1] == rows[1][0]
+    assert merged.t[rows[1][0]] - merged.t[rows[0][1] - 1] > 0.29
+    assert merged.meta["gap_samples"] >= int(0.29 * 200)
+    # the tau_m1 column is cos(joints time): checked against the closed form (1 ms jitter
+    # steps with linear interpolation: error below 1e-6 rad away from the gap)
+    np.testing.assert_allclose(merged.column("tau_m1"), np.cos(merged.t - est.offset),
+                               atol=1e-6)

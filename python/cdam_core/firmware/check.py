@@ -52,4 +52,5 @@ def check(model_path, *, build_dir=None, inputs=None, timeout: float = 60.0) -> 
         "vectors": eq["vectors"],
         "model_sha256": fm.sha256,
         "network": f"{fm.n_inputs}-{fm.hidden}-{fm.n_outputs}",
+        "sandbox": eq["sandbox"],
     }

@@ -8,26 +8,29 @@ from pathlib import Path
 import numpy as np
 
 from cdam_core.firmware.model import FirmwareModel, load_firmware_model, theta_fnv1a
+from cdam_core.firmware import sandbox
 from cdam_core.firmware.paths import QEMU, _run
 
 
 def run_qemu(elf, cwd, *, timeout: float = 30.0, icount: int | None = 4,
              extra: list | None = None) -> tuple[int, dict, str]:
-    """Run an ELF on ``-M netduinoplus2`` with semihosting under ``timeout``.
+    """Run an ELF on ``-M netduinoplus2`` with semihosting under ``timeout``, in the private
+    root of :mod:`.sandbox` (the image and ``cwd`` are all it sees of the host files).
 
     Returns (exit status, the ``key=value`` lines printed as a dict, the whole console text).
     Exit status 124 means the timeout hit.
     """
-    cmd = ["timeout", "--kill-after=5", str(float(timeout)), QEMU, "-M", "netduinoplus2",
-           "-display", "none", "-monitor", "none", "-serial", "null",
-           "-chardev", "stdio,id=s0",
-           "-semihosting-config", "enable=on,target=native,chardev=s0",
-           "-kernel", str(Path(elf).resolve())]
+    args = ["-M", "netduinoplus2", "-display", "none", "-monitor", "none", "-serial", "null",
+            "-chardev", "stdio,id=s0",
+            "-semihosting-config", "enable=on,target=native,chardev=s0",
+            "-kernel", sandbox.IMAGE]
     if icount is not None:
-        cmd[6:6] = ["-icount", f"shift={int(icount)}"]
-    cmd += list(extra or [])
+        args[2:2] = ["-icount", f"shift={int(icount)}"]
+    args += list(extra or [])
+    inner, where = sandbox.sandboxed(QEMU, args, elf, cwd)
+    cmd = ["timeout", "--kill-after=5", str(float(timeout))] + inner
     r = _run(cmd, cwd=str(cwd), timeout=timeout + 10)
-    kv = {}
+    kv = {"sandbox": where}
     for line in r.stdout.splitlines():
         if "=" in line:
             k, v = line.split("=", 1)
@@ -70,6 +73,7 @@ def run_equivalence(build_dir, model, X_normalised, *, timeout: float = 60.0,
         "instructions_per_inference": round((int(kv["infer_ticks"]) - empty) / reps / tpi, 1),
         "instructions_per_prediction": round((int(kv["predict_ticks"]) - empty) / reps / tpi, 1),
         "stack_bytes": int(kv["stack_bytes"]),
+        "sandbox": kv["sandbox"],
         "vectors": int(Y.shape[0]),
         "outputs": Y,
     }

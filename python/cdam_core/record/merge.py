@@ -22,7 +22,11 @@ import numpy as np
 from scipy import signal
 
 from cdam_core.record.dataset import Dataset
-from cdam_core.record.resample import check_time, resample, uniform_grid
+from cdam_core.record.resample import check_time, resample, segmented_grid, uniform_grid
+
+# A step between successive samples longer than GAP_PERIODS of the record's median sampling
+# period is a gap (a logger dropout, not jitter): no merged sample falls inside it.
+GAP_PERIODS = 5.0
 
 __all__ = ["OffsetEstimate", "estimate_offset", "merge_records"]
 
@@ -133,6 +137,30 @@ def estimate_offset(t_a, x_a, t_b, x_b, rate: float | None = None,
     return OffsetEstimate(float(offset), unc, corr, float(rate), segs.tolist())
 
 
+def _gaps(t: np.ndarray, which: str) -> list[dict]:
+    """Steps of ``t`` longer than GAP_PERIODS median sampling periods, in flight time."""
+    d = np.diff(t)
+    if d.size == 0:
+        return []
+    limit = GAP_PERIODS * float(np.median(d))
+    return [{"record": which, "start": float(t[i]), "end": float(t[i + 1])}
+            for i in np.flatnonzero(d > limit)]
+
+
+def _without(start: float, stop: float, gaps: list) -> list[tuple[float, float]]:
+    """[start, stop] minus the open gap intervals, as (start, stop) pieces."""
+    pieces, a = [], start
+    for g in sorted(gaps, key=lambda g: g["start"]):
+        if g["end"] <= a or g["start"] >= stop:
+            continue
+        if g["start"] > a:
+            pieces.append((a, g["start"]))
+        a = max(a, g["end"])
+    if a < stop:
+        pieces.append((a, stop))
+    return pieces
+
+
 def merge_records(flight: Dataset, joints: Dataset, pair: tuple[str, str] | None = None,
                   rate: float | None = None, max_lag: float | None = None
                   ) -> tuple[Dataset, OffsetEstimate]:
@@ -146,6 +174,10 @@ def merge_records(flight: Dataset, joints: Dataset, pair: tuple[str, str] | None
 
     Columns of ``joints`` whose names are already in ``flight`` get the suffix ``_joints``.
     Each column is resampled as its record's ``meta["interpolation"]`` says (default linear).
+    A gap in either record (a step longer than GAP_PERIODS sampling periods) stays a gap: no
+    merged sample falls inside it (``t`` jumps over it); ``meta["gapless_rows"]`` lists the row
+    ranges between gaps, ``meta["gaps"]`` the gaps and ``meta["gap_samples"]`` the samples
+    left out.
     """
     if not isinstance(flight, Dataset) or not isinstance(joints, Dataset):
         raise ValueError("flight, joints: expected Dataset objects")
@@ -164,7 +196,11 @@ def merge_records(flight: Dataset, joints: Dataset, pair: tuple[str, str] | None
     if stop <= start:
         raise ValueError("records do not overlap after alignment "
                          f"(offset {est.offset:.6f} s)")
-    grid = uniform_grid(start, stop, rate)
+    gaps = _gaps(flight.t, "flight") + _gaps(tj, "joints")
+    grid, rows = segmented_grid(_without(start, stop, gaps), rate, start)
+    if not rows:
+        raise ValueError("records: no stretch of their overlap is free of gaps")
+    full = uniform_grid(start, stop, rate).size
     cols, data, units, interp = [], [], {}, {}
     for ds, t, rename in ((flight, flight.t, False), (joints, tj, True)):
         kinds = ds.meta.get("interpolation") or {}
@@ -186,5 +222,8 @@ def merge_records(flight: Dataset, joints: Dataset, pair: tuple[str, str] | None
         "interpolation": interp,
         "inputs": flight.inputs + [rn[c] for c in joints.inputs],
         "outputs": flight.outputs + [rn[c] for c in joints.outputs],
+        "gaps": gaps,
+        "gapless_rows": [list(r) for r in rows],
+        "gap_samples": int(full - grid.size),
     }
     return Dataset(t=grid, columns=cols, data=np.column_stack(data), meta=meta), est
