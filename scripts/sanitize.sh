@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The core under AddressSanitizer + UBSan: the C++ unit tests, then a hypothesis pass over every
 # _core binding (tests/robust/_fuzz_core_child.py) with the sanitized extension loaded into the
-# venv's Python (libasan and libstdc++ preloaded, so that ASan intercepts C++ throws; leak checks off: CPython itself does not free everything).
+# venv's Python (libasan and libstdc++ preloaded, so that ASan intercepts C++ throws; leak
+# checks off: CPython itself does not free everything).
 # Part of scripts/test.sh; EXAMPLES (default 60) sets the hypothesis budget.
 set -euo pipefail
 cd "$(dirname "$0")/.."
