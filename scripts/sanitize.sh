@@ -7,7 +7,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 .venv/bin/cmake -S . -B build/sanitize -G Ninja -DCDAM_PYTHON=ON -DCDAM_TESTS=ON \
-  -DCDAM_SANITIZE=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+  -DCDAM_SANITIZE=ON -DCMAKE_BUILD_TYPE=Release -DCMAKE_CXX_FLAGS_RELEASE=-O1 \
   -DPython_EXECUTABLE="$PWD/.venv/bin/python" > build/sanitize.log 2>&1 \
   || { cat build/sanitize.log; exit 1; }
 .venv/bin/cmake --build build/sanitize -j2 --target cdam_tests _core >> build/sanitize.log 2>&1 \
