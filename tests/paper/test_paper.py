@@ -152,6 +152,16 @@ def test_r_equals_corrcoef_of_the_saved_predictions(run):
     assert checked > 0
 
 
+def _smoothed_decimated(path):
+    """The record's outputs through scipy alone: three savgol (5-point cubic) passes, then
+    decimation by 10 (the paper pipeline's preprocessing, written independently)."""
+    ds = read_dataset(path)
+    Y = ds.select(ds.outputs)
+    for _ in range(3):
+        Y = savgol_filter(Y, 5, 3, mode="interp", axis=0)
+    return decimate(Y, 10, ftype="fir", axis=0, zero_phase=True)
+
+
 def test_measured_arrays_are_the_smoothed_decimated_records(run):
     """Independent of the package: scipy's savgol (5-point cubic) passes and decimate on the
     saved CSV records give the pooled 'measured' arrays of the static and NARX sections."""
@@ -159,11 +169,7 @@ def test_measured_arrays_are_the_smoothed_decimated_records(run):
     npz = np.load(out / "predictions.npz")
 
     def prep(name):
-        ds = read_dataset(out / name)
-        Y = ds.select(ds.outputs)
-        for _ in range(3):
-            Y = savgol_filter(Y, 5, 3, mode="interp", axis=0)
-        return decimate(Y, 10, ftype="fir", axis=0, zero_phase=True)
+        return _smoothed_decimated(out / name)
 
     ti, tii = prep("flight_i.csv"), prep("flight_ii.csv")
     test = np.vstack([ti[len(ti) // 2:], tii[len(tii) // 2:]])
@@ -372,11 +378,7 @@ def test_persistence_baseline_from_the_records(run):
     npz = np.load(out / "predictions.npz")
 
     def prep(name):
-        ds = read_dataset(out / name)
-        Y = ds.select(ds.outputs)
-        for _ in range(3):
-            Y = savgol_filter(Y, 5, 3, mode="interp", axis=0)
-        return decimate(Y, 10, ftype="fir", axis=0, zero_phase=True)
+        return _smoothed_decimated(out / name)
 
     segs = [y[len(y) // 2:] for y in (prep("flight_i.csv"), prep("flight_ii.csv"))]
     for mode, k in (("one_step", 1), ("k_step_0.1s", 10)):

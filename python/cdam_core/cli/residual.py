@@ -38,6 +38,8 @@ def run(args) -> int:
              folders=[("--report", args.report)])
     if args.simulated and not args.test:
         raise CliError("--simulated: needs --test (the record simulated)")
+    if args.simulated and not str(args.simulated).lower().endswith(".csv"):
+        raise CliError(f"--simulated: expected a .csv file name, got {args.simulated!r}")
     if args.n_init < 1:
         raise CliError(f"--n-init: must be >= 1, got {args.n_init}")
     if args.cutoff is not None and not (math.isfinite(args.cutoff) and args.cutoff > 0):
@@ -124,18 +126,17 @@ def _test(args, mapping: dict, inputs: list, sel) -> dict:
            "outputs": [mapping[p] for p in m.positions],
            "scores": {k: v.to_json() for k, v in scores.items()}}
     if args.simulated:
-        from cdam_core.base.jsonio import write_text_atomic
-        heads, cols_out = ["t"], [ts.t]
+        from cdam_core.record.dataset import Dataset, write_dataset
+        names, cols_out = [], []
         for j, p in enumerate(m.positions):
-            heads.append(mapping[p])
+            names.append(mapping[p])
             cols_out.append(test[p])
             for label, sc in scores.items():
                 if sc.status == "ok":
-                    heads.append(f"{mapping[p]}_{label}")
+                    names.append(f"{mapping[p]}_{label}")
                     cols_out.append(sc.prediction[:, j])
-        rows = np.column_stack(cols_out)
-        text = ",".join(heads) + "\n" + "\n".join(",".join(f"{v:.10g}" for v in r) for r in rows)
-        write_text_atomic(args.simulated, text + "\n")
+        write_dataset(args.simulated, Dataset(t=ts.t, columns=names,
+                                              data=np.column_stack(cols_out)), sidecar=False)
         out["simulated"] = str(args.simulated)
     return out
 

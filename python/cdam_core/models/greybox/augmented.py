@@ -24,7 +24,7 @@ import numpy as np
 
 from cdam_core.models.greybox.declared import DerivativeFilter
 from cdam_core.models.greybox.effects import LIBRARY, Effect
-from cdam_core.models.greybox.estimation import fit as idim_fit
+from cdam_core.models.greybox.estimation import apply_effects, design, fit as idim_fit
 from cdam_core.models.greybox.registry import MODEL_NAMES, get_model
 from cdam_core.models.protocol import Model
 
@@ -267,7 +267,6 @@ class GreyBox(Model):
             raise ValueError(f"Y: {wanted[0].key} needs at least 20 measured rows per segment")
         raw, extra = self._signals(m, U, Y)
         sig = m.prepare(np.arange(U.shape[0]) * float(self.dt), raw, self._filter(m), extra or None)
-        from cdam_core.models.greybox.estimation import apply_effects
         s = apply_effects(m, sig, self.effects)
         return {e.key: e.columns(s) for e in wanted}
 
@@ -369,7 +368,6 @@ class GreyBox(Model):
 def _parameter_names(m, effects, g: GreyBox) -> set:
     """Every parameter the model with ``effects`` has (its equations' columns), from a tiny
     synthetic record: what a file must hold, no more and no less."""
-    from cdam_core.models.greybox.estimation import design
     n = 64
     t = np.arange(n) * float(g.dt)
     raw = {name: np.zeros(n) for name in m.inputs}
