@@ -22,6 +22,7 @@ from scipy import optimize, stats
 
 from cdam_core.residual import diagnostics as dg
 from cdam_core.models.greybox.estimation import Fit, fit, free_run_error, set_equation_weights
+from cdam_core.residual.validation import BlockedCV
 
 
 @dataclass
@@ -40,7 +41,13 @@ class Candidate:
 
     @property
     def significant(self) -> bool:
+        """The equation-error statistics alone (used when held-out validation is unavailable)."""
         return bool(self.pvalue < self._alpha and self.dbic < 0 and self.gain >= self._min_gain)
+
+    @property
+    def screened(self) -> bool:
+        """Worth a held-out test: the F-test on the effective sample size at ``alpha``."""
+        return bool(self.pvalue < self._alpha)
 
     _alpha: float = 0.01
     _min_gain: float = 0.01
@@ -183,11 +190,13 @@ def _errors(f: Fit, sig_fr, free_run: bool, substeps, store=None, label=""):
 
 
 def backward(model, sig, current: Fit, protected=(), alpha: float = 0.01, trim: int = 50,
-             min_gain: float = 0.01) -> tuple[Fit, list]:
+             min_gain: float = 0.01, cv=None) -> tuple[Fit, list]:
     """Backward elimination: re-test every claimed effect with all the others in the model
     (the reduced model re-estimated without it); drop the least significant one that fails,
-    repeat. ``protected``: keys that are never dropped (declared effects). Returns the final
-    fit and ``[{"effect", "channel", "p_value", "sse_share_removed"}]`` of the dropped ones."""
+    repeat. With ``cv`` (a :class:`~cdam_core.residual.validation.BlockedCV`) the test is the
+    held-out one (Bonferroni over the claimed effects); without, the equation-error statistics.
+    ``protected``: keys that are never dropped (declared effects). Returns the final fit and
+    ``[{"effect", "channel", "p_value", ...}]`` of the dropped ones."""
     removed = []
     while True:
         claimed = [e for e in current.effects if e.key not in protected]
@@ -196,25 +205,47 @@ def backward(model, sig, current: Fit, protected=(), alpha: float = 0.01, trim: 
             others = tuple(x for x in current.effects if x is not e)
             if any(e.name in o.requires and o.channel == e.channel for o in others):
                 continue   # asymmetric friction needs its Coulomb term: test them in that order
+            if cv is not None:
+                v = cv.compare((others, model), (current.effects, model), len(claimed), alpha)
+                if not v.better and (worst is None or v.p_value > worst[1]):
+                    worst = (e, v.p_value, {"validation": v.to_json()})
+                continue
             reduced = fit(model, sig, others, trim, current)
             c = compare(model, sig, reduced, current, e, alpha, min_gain)
-            if not c.significant and (worst is None or c.pvalue > worst[1].pvalue
-                                      or (c.pvalue == worst[1].pvalue and c.gain < worst[1].gain)):
-                worst = (reduced, c)
+            if not c.significant and (worst is None or c.pvalue > worst[1]
+                                      or (c.pvalue == worst[1] and c.gain < worst[2]["sse_share_removed"])):
+                worst = (e, c.pvalue, {"sse_share_removed": c.gain, "delta_bic": c.dbic})
         if worst is None:
             return current, removed
-        reduced, c = worst
-        removed.append({"effect": c.effect.name, "channel": c.effect.channel,
-                        "p_value": c.pvalue, "sse_share_removed": c.gain,
-                        "delta_bic": c.dbic})
-        current = reduced
+        e, pval, info = worst
+        removed.append({"effect": e.name, "channel": e.channel, "p_value": pval, **info})
+        current = fit(model, sig, tuple(x for x in current.effects if x is not e), trim, current)
+
+
+def drop_unsupported_terms(model, sig, current: Fit, cv, alpha: float, trim: int, keep=()) -> tuple:
+    """Declared terms tested like effects: each of the model's ``optional_terms`` (an offset,
+    gravity, the cable damping) not fixed and not in ``keep`` stays only if the model with it
+    predicts held-out windows better than the model with it fixed at 0 (Bonferroni over the
+    terms). Returns (model, fit, [{"term", "p_value", "validation"}] of the dropped ones)."""
+    terms = [p for p in getattr(model, "optional_terms", ()) if p not in model.fixed
+             and p not in keep]
+    dropped = []
+    for p in terms:
+        reduced = type(model)({**model.fixed, p: 0.0})
+        v = cv.compare((current.effects, reduced), (current.effects, model), len(terms), alpha)
+        if not v.better:
+            dropped.append({"term": p, "value": float(current.theta.get(p, float("nan"))),
+                            "p_value": v.p_value, "validation": v.to_json()})
+            model = reduced
+            current = fit(model, sig, current.effects, trim)
+    return model, current, dropped
 
 
 def select(model, sig: dict, candidates, alpha: float = 0.01, max_steps: int | None = None,
            trim: int | None = None, free_run: bool = True, validation: dict | None = None,
            substeps: int | None = None, lags: int = 25, min_prominence: float = 1.0,
            spectrum_seconds: float = 0.25, min_gain: float | None = None,
-           declared_effects=()) -> Selection:
+           declared_effects=(), held_out: bool = True, keep_terms=()) -> Selection:
     """Run the stepwise selection on the prepared signals ``sig``.
 
     ``validation``: prepared signals of another record on which the free-run errors are
@@ -222,7 +253,15 @@ def select(model, sig: dict, candidates, alpha: float = 0.01, max_steps: int | N
     already holds (the sidecar's ``model.effects``); they are estimated from the start and never
     claimed or dropped. ``max_steps`` and ``trim`` default to the model's (5 and 50 samples for
     the axis models; the flight models set their own). After the forward steps a backward pass
-    re-tests each claimed effect with all the others present (:func:`backward`). Returns a
+    re-tests each claimed effect with all the others present (:func:`backward`).
+
+    ``held_out`` (default): every decision is taken on data the fit did not see
+    (:mod:`cdam_core.residual.validation`): candidates that pass the F-test screen are tried on
+    held-out windows, the best one that predicts them significantly better (Bonferroni over the
+    candidates tried) is added; the backward pass and the declared model's optional terms
+    (``keep_terms`` excepted) are tested the same way. When the record is too short for it (or
+    with ``held_out=False``) the equation-error statistics decide (F-test, BIC and
+    ``min_gain`` on the effective sample size), as the settings state. Returns a
     :class:`Selection`.
     """
     if not 0 < alpha < 1:
@@ -253,6 +292,14 @@ def select(model, sig: dict, candidates, alpha: float = 0.01, max_steps: int | N
         set_equation_weights(sig, declared)
         declared = fit(model, sig, declared.effects, trim)
     current = declared
+    cv, cv_info = None, {"status": "off"}
+    if held_out:
+        try:
+            cv = BlockedCV(model, sig, trim, declared=declared)
+            cv_info = {"status": "ok", **cv.describe()}
+        except ValueError as exc:
+            cv_info = {"status": "unavailable", "reason": str(exc),
+                       "instead": "equation-error statistics (F-test, BIC, min_gain)"}
     err_current = _errors(declared, sig_fr, free_run, substeps, store, "declared")
     declared_error = dict(err_current)
     steps = []
@@ -268,7 +315,16 @@ def select(model, sig: dict, candidates, alpha: float = 0.01, max_steps: int | N
             break
         ranked = sorted((evaluate(model, sig, current, e, alpha, trim, min_gain) for e in pool),
                         key=lambda c: -c.err)
-        best = next((c for c in ranked if c.significant), None)
+        held = None
+        if cv is not None:
+            screened = [c for c in ranked if c.screened]
+            tried = [(c, cv.compare((current.effects, None), (c.fit.effects, None),
+                                    len(screened), alpha)) for c in screened]
+            passing = [cv_ for cv_ in tried if cv_[1].better]
+            best, held = min(passing, key=lambda cv_: cv_[1].score_rich) if passing \
+                else (None, None)
+        else:
+            best = next((c for c in ranked if c.significant), None)
         if best is None:
             break
         ch = best.effect.display_equation(current.residuals)
@@ -286,16 +342,22 @@ def select(model, sig: dict, candidates, alpha: float = 0.01, max_steps: int | N
             "runner_up": ({"effect": ranked[1].effect.key, "err": ranked[1].err,
                            "p_value": ranked[1].pvalue} if len(ranked) > 1 else None),
         }
+        if held is not None:
+            evidence["validation"] = held.to_json()
         steps.append(Step(best, current, err_current, err_after, evidence,
                           [(c.effect.key, c.err, c.pvalue, c.dbic) for c in ranked]))
         current, err_current = best.fit, err_after
-    current, removed = backward(model, sig, current, dkeys, alpha, trim, min_gain)
+    current, removed = backward(model, sig, current, dkeys, alpha, trim, min_gain, cv)
     if removed:
         gone = {(r["effect"], r["channel"]) for r in removed}
         steps = [st for st in steps if (st.candidate.effect.name, st.candidate.effect.channel)
                  not in gone]
-    final_error = _errors(current, sig_fr, free_run, substeps, store, "final") if removed \
-        else dict(err_current)
+    dropped_terms = []
+    if cv is not None:
+        model, current, dropped_terms = drop_unsupported_terms(model, sig, current, cv, alpha,
+                                                               trim, keep_terms)
+    final_error = _errors(current, sig_fr, free_run, substeps, store, "final") \
+        if removed or dropped_terms else dict(err_current)
     if current.violations:   # the model handed on is refitted with the physical bounds
         current = fit(model, sig, current.effects, trim, bounded=True)
         final_error = _errors(current, sig_fr, free_run, substeps, store, "final")
@@ -317,6 +379,7 @@ def select(model, sig: dict, candidates, alpha: float = 0.01, max_steps: int | N
             unexplained.append({"kind": "spectral_peak", "channel": eq, **pk,
                                 "acf_lags_outside_band": len(ac["outside"])})
     settings = {"declared_effects": sorted(dkeys), "removed_in_backward_pass": removed,
+                "validation": cv_info, "declared_terms_dropped": dropped_terms,
                 "alpha": alpha, "min_gain": min_gain, "trim": trim, "lags": lags, "min_prominence_decades": min_prominence,
                 "candidates": [c.key for c in candidates]}
     return Selection(model, declared, current, steps, declared_error, white, unexplained,

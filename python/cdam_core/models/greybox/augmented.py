@@ -22,6 +22,7 @@ import dataclasses
 
 import numpy as np
 
+from cdam_core.base.checks import as_2d
 from cdam_core.models.greybox.declared import DerivativeFilter
 from cdam_core.models.greybox.effects import LIBRARY, Effect
 from cdam_core.models.greybox.estimation import apply_effects, design, fit as idim_fit
@@ -293,6 +294,24 @@ class GreyBox(Model):
             if path:
                 out[j] = x
         return out if path else x
+
+    def windows(self, U, Y, starts, steps: int) -> np.ndarray:
+        """Simulate ``steps`` samples from the measured state at each row of ``starts`` (one
+        segment ``U``, ``Y``: multiple shooting windows); returns the simulated positions
+        (steps, len(starts), outputs) of rows ``start + 1 .. start + steps``."""
+        self._check_fitted()
+        U, Y = as_2d(U, "U"), as_2d(Y, "Y")
+        if U.shape != (Y.shape[0], self.n_inputs_) or Y.shape[1] != self.n_outputs_:
+            raise ValueError(f"U, Y: expected ({Y.shape[0]}, {self.n_inputs_}) and "
+                             f"(N, {self.n_outputs_}), got {U.shape} and {Y.shape}")
+        starts = np.asarray(starts, dtype=int)
+        if starts.ndim != 1 or starts.size == 0:
+            raise ValueError("starts: expected a non-empty list of rows")
+        steps = int(steps)
+        if steps < 1 or starts.min() < self.t0 - 1 or starts.max() + steps >= Y.shape[0]:
+            raise ValueError(f"starts/steps: windows must lie in rows {self.t0 - 1}.."
+                             f"{Y.shape[0] - 1} of the segment")
+        return self._rollout(U, Y, starts, steps, path=True)
 
     def _one_step(self, U, Y):
         return self._k_step(U, Y, 1)[self.t0:]

@@ -89,6 +89,9 @@ class GreyBoxModel:
     parameter_names: tuple[str, ...] = ()
     viscous: dict[str, tuple[str, str]] = {}   # equation -> (viscous parameter, velocity signal)
     offset: dict[str, str] = {}                # equation -> constant parameter, if any
+    # declared terms the data must support to stay (tested like effects on held-out data,
+    # residual.selection.drop_unsupported_terms; a dropped term is fixed at 0)
+    optional_terms: tuple[str, ...] = ()
     defaults: dict[str, str] = {}              # signal -> default dataset column
     # physical bounds (documented facts: inertias, stiffnesses and dampings are not negative);
     # an estimate outside them is refitted with the bounds and both are reported (estimation.fit)
@@ -170,6 +173,7 @@ class RigidAxis(GreyBoxModel):
     positions = ("q",)
     equation_names = ("tau",)
     parameter_names = ("M", "Fv", "offset")
+    optional_terms = ("offset",)
     bounds = {"M": (0.0, INF), "Fv": (0.0, INF)}
     viscous = {"tau": ("Fv", "q_d")}
     offset = {"tau": "offset"}
@@ -196,6 +200,7 @@ class FlexibleJoint(GreyBoxModel):
     positions = ("theta_m", "q")
     equation_names = ("tau_m", "tau_l")
     parameter_names = ("Im", "Dm", "Ks", "Kd", "I", "Dl", "G")
+    optional_terms = ("G", "Kd")
     bounds = {p: (0.0, INF) for p in ("Im", "Dm", "Ks", "Kd", "I", "Dl")}
     viscous = {"tau_m": ("Dm", "theta_m_d"), "tau_l": ("Dl", "q_d")}
     offset = {}

@@ -143,8 +143,8 @@ class AsymmetricFriction(Effect):
     def applies_to(self, model) -> bool:
         return self.channel in model.viscous
 
-    def _has_offset(self, model):
-        return self.channel in model.offset
+    def _has_offset(self, model):   # an estimated constant term on the channel
+        return self.channel in model.offset and model.offset[self.channel] not in model.fixed
 
     def regressors(self, s, model):
         v = np.asarray(s[model.viscous[self.channel][1]], dtype=float)

@@ -153,7 +153,7 @@ def _components(eqs: dict, est: list) -> list:
 
 
 def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None,
-        bounded: bool = False) -> Fit:
+        bounded: bool = False, rows=None) -> Fit:
     """Estimate the parameters of ``model`` with ``effects`` by linear least squares.
 
     Estimates outside the physical bounds of the model and its effects (``bounds``) are
@@ -167,6 +167,9 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None,
     ``base`` (an earlier fit on the same record) a block whose equations are unchanged (same
     columns, checked by content for the parallel-filtered models) is taken over from ``base``
     instead of being solved again. The estimates are the same either way.
+
+    ``rows``: a boolean mask over the samples; only rows where it is true (and outside the
+    trimmed edges) are fitted (cross-validation folds). The residuals are then those rows'.
     """
     effects = tuple(effects)
     n = sig["t"].size
@@ -174,6 +177,16 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None,
     if trim < 0 or 2 * trim >= n - 10:
         raise ValueError(f"trim: {trim} leaves too few of the {n} samples")
     keep = slice(trim, n - trim)
+    if rows is not None:
+        rows = np.asarray(rows)
+        if rows.dtype != bool or rows.shape != (n,):
+            raise ValueError(f"rows: expected a boolean mask of {n} samples")
+        inner = np.zeros(n, dtype=bool)
+        inner[keep] = True
+        keep = np.flatnonzero(inner & rows)
+        if keep.size < 10:
+            raise ValueError(f"rows: {keep.size} rows left to fit")
+        base = None   # blocks are reused only between fits of the same rows
     s, eqs = design(model, sig, effects)
     names = []
     for _, cols in eqs.values():
