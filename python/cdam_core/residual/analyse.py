@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from cdam_core.models.greybox.declared import DerivativeFilter
+from cdam_core.residual.cutoff import choose_cutoff
 from cdam_core.models.greybox.registry import get_model
 from cdam_core.models.greybox.effects import LIBRARY, candidates as library_candidates
 from cdam_core.residual.selection import Selection, select
@@ -21,8 +22,9 @@ def analyse(model: str, t, signals: dict, extra: dict | None = None, fixed: dict
     of another record for the free-run errors; ``fixed``: known parameters (e.g. the weighed
     mass ``m``, which ``payload_mass`` needs); ``declared``: library effect names the declared
     model already holds (on every channel they apply to), e.g. the sidecar's model effects;
-    ``cutoff_hz``: derivative filter cutoff (default: the model's, 100 Hz for the axis models,
-    2 Hz for the flight models' body channels).
+    ``cutoff_hz``: derivative filter cutoff (default: chosen from the record by held-out
+    simulation, :func:`cdam_core.residual.cutoff.choose_cutoff`; the choice and the candidates'
+    scores are in ``settings["filter_choice"]``).
     """
     m = get_model(model, fixed)
     if isinstance(declared, str):
@@ -30,12 +32,21 @@ def analyse(model: str, t, signals: dict, extra: dict | None = None, fixed: dict
     for name in declared:
         if name not in LIBRARY:
             raise ValueError(f"declared: unknown effect {name!r} (known: {', '.join(LIBRARY)})")
-    filt = DerivativeFilter(cutoff_hz=m.default_cutoff_hz if cutoff_hz is None else cutoff_hz)
+    cands = library_candidates(m, list((extra or {}).keys()), options)
+    dec = [c for c in cands if c.name in set(declared)]
+    choice = {"rule": "given" if cutoff_hz is not None else "the model's default",
+              "chosen_hz": cutoff_hz if cutoff_hz is not None else m.default_cutoff_hz}
+    trim = None
+    if cutoff_hz is not None or getattr(m, "parallel_filter", False):
+        filt = DerivativeFilter(cutoff_hz=choice["chosen_hz"])
+    else:   # chosen from the record (the flight models keep their documented bands)
+        filt, choice = choose_cutoff(m, t, signals, extra, dec)
+        trim = choice["trim_samples"]
     sig = m.prepare(t, signals, filt, extra)
     val = None
     if validation is not None:
         val = m.prepare(validation[0], validation[1], sig["filter"], None)
-    cands = library_candidates(m, list((extra or {}).keys()), options)
-    dec = [c for c in cands if c.name in set(declared)]
-    return select(m, sig, cands, alpha=alpha, free_run=free_run, validation=val,
-                  max_steps=max_steps, declared_effects=dec)
+    sel = select(m, sig, cands, alpha=alpha, free_run=free_run, validation=val,
+                 max_steps=max_steps, declared_effects=dec, trim=trim)
+    sel.settings["filter_choice"] = choice
+    return sel

@@ -18,7 +18,9 @@ def greybox_of(fitted, dt: float) -> GreyBox:
     """The ``greybox`` model of an IDIM fit (the filter and external columns it used)."""
     filt = fitted.signals.get("filter")
     extra = [e.column for e in fitted.effects if getattr(e, "column", "")]
-    return GreyBox.from_fit(fitted, dt=dt, cutoff_hz=None if filt is None else filt.cutoff_hz,
+    cut = None if filt is None else (dict(filt.per_signal) if getattr(filt, "per_signal", ())
+                                     else filt.cutoff_hz)
+    return GreyBox.from_fit(fitted, dt=dt, cutoff_hz=cut,
                             filter_order=4 if filt is None else filt.order, extra_columns=extra)
 
 

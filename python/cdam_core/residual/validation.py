@@ -4,12 +4,16 @@ The record is cut into ``folds`` contiguous blocks. For one model structure (the
 with its fixed parameters, plus effects) each block is held out in turn: the parameters are
 estimated (IDIM-LS with the physical bounds) on the other blocks, leaving out ``guard`` samples
 on each side of the held-out block (the zero-phase filter mixes neighbouring samples), and the
-fitted model simulates non-overlapping windows of ``H`` samples inside the held-out block, each
-from the measured state at its start with the measured inputs (multiple shooting: a long open
-run of an integrating axis measures drift, a window measures the dynamics).
+fitted model simulates non-overlapping windows of ``H`` samples inside the held-out block with
+the measured inputs (multiple shooting: a long open run of an integrating axis measures drift, a
+window measures the dynamics). As in multiple shooting, each window's initial state (positions
+and velocities) is estimated by least squares on the window, linearised about the measured
+state (one extra simulation per state component, by finite differences): a coarse encoder's
+differenced velocity would otherwise decide the error.
 
-When the declared model cannot simulate the record usefully (its held-out windows are worse
-than holding the last measurement: an open-loop unstable flight, say), the windows score the
+When the declared model cannot simulate the record usefully (its held-out windows, started
+from the measured state, are worse than holding the last measurement: an open-loop unstable
+flight, say), the windows score the
 held-out *equation* error instead (each equation's squared residual normalised by the variance
 of the declared model's residual on it): ``criterion`` says which.
 
@@ -39,6 +43,7 @@ __all__ = ["BlockedCV", "Comparison", "motion_horizon"]
 
 FOLDS = 5
 WINDOWS_PER_BLOCK = 8
+MIN_WINDOWS = 10   # fewer paired windows cannot reach a one-sided 1 % level (2^-10 ~ 0.001)
 
 
 def motion_horizon(sig: dict, positions) -> int:
@@ -85,7 +90,7 @@ class BlockedCV:
     """Held-out window errors of model structures on one prepared record (module doc)."""
 
     def __init__(self, model, sig: dict, trim: int, folds: int = FOLDS,
-                 horizon: int | None = None, declared=None):
+                 horizon: int | None = None, declared=None, guard: int | None = None):
         self.model, self.sig, self.trim = model, sig, int(trim)
         n = np.asarray(sig["t"]).size
         self.dt = float(sig["dt"])
@@ -96,10 +101,15 @@ class BlockedCV:
         block = int(np.min(np.diff(self.edges)))
         h = motion_horizon(sig, model.positions) if horizon is None else int(horizon)
         self.horizon = int(max(2, min(h, block // WINDOWS_PER_BLOCK)))
-        if block < 4 * self.horizon or block <= 2 * self.trim + 10:
-            raise ValueError(f"record: {n} samples are too few for {self.folds}-fold "
-                             f"validation windows")
-        self.guard = self.trim
+        self.guard = self.trim if guard is None else int(guard)
+        H = self.horizon
+        # window start rows within each block, clear of the record's trimmed edges
+        self.starts = [np.arange(max(a + 1, self.trim), min(b, n - self.trim) - H, H) - a
+                       for a, b in zip(self.edges[:-1], self.edges[1:])]
+        count = sum(st.size for st in self.starts)
+        if block < 4 * H or count < MIN_WINDOWS:
+            raise ValueError(f"record: {n} samples hold {count} validation windows of {H} "
+                             f"samples (need {MIN_WINDOWS}) after {self.trim} edge samples")
         pos = list(model.positions)
         self.Y = np.column_stack([np.asarray(sig[p + "_raw"], dtype=float) for p in pos])
         dY = self.Y[self.horizon:] - self.Y[:-self.horizon]
@@ -110,14 +120,17 @@ class BlockedCV:
         # holding the last measurement, else held-out equation error
         self.criterion = "simulation"
         self.eq_norm = {}
+        self._fit_state = True
         if declared is not None:
             self.eq_norm = {eq: max(float(np.var(r)), 1e-300) for eq, r in declared.residuals.items()}
+            self._fit_state = False     # the rule reads windows from the measured state
             e0, _ = self.scores(declared.effects)
-            if not (np.all(np.isfinite(e0)) and float(np.mean(e0)) < 1.0):
+            self._fit_state = True
+            self._cache.clear()
+            self.declared_window_score = float(np.mean(e0)) if np.all(np.isfinite(e0)) \
+                else float("nan")
+            if not self.declared_window_score < 1.0:
                 self.criterion = "equation"
-                self.declared_window_score = float(np.mean(e0)) if np.all(np.isfinite(e0)) \
-                    else float("nan")
-                self._cache.clear()
 
     def _inputs(self, effects) -> np.ndarray:
         m, s = self.model, self.sig
@@ -156,8 +169,7 @@ class BlockedCV:
         n = self.Y.shape[0]
         for k in range(self.folds):
             a, b = int(self.edges[k]), int(self.edges[k + 1])
-            # window start rows within the block (clear of the filter's edge samples)
-            starts = np.arange(max(a + 1, self.trim), min(b, n - self.trim) - H, H) - a
+            starts = self.starts[k]
             mask = np.ones(n, dtype=bool)
             mask[max(0, a - self.guard):min(n, b + self.guard)] = False
             try:
@@ -167,16 +179,51 @@ class BlockedCV:
                     continue
                 g = greybox_of(f, self.dt)
                 starts = starts[starts >= g.t0 - 1]
-                P = g.windows(U[a:b], self.Y[a:b], starts, H)          # (H, W, m)
-                idx = starts[None, :] + np.arange(1, H + 1)[:, None]   # rows of P
-                err = (P - self.Y[a:b][idx]) ** 2 / self.norm
-                out.append(np.mean(err, axis=(0, 2)))
+                out.append(self._shooting(g, U[a:b], self.Y[a:b], starts))
             except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
                 reason = reason or f"fold {k + 1}: {exc}"
                 out.append(np.full(starts.size, np.nan))
         res = (np.concatenate(out), reason)
         self._cache[key] = res
         return res
+
+    def _shooting(self, g, U, Y, starts) -> np.ndarray:
+        """Per-window normalised squared error with each window's initial state fitted."""
+        H, m, W = self.horizon, Y.shape[1], starts.size
+        x0 = Y[starts].astype(float)
+        v0 = (Y[starts] - Y[starts - 1]) / self.dt
+        hx = 1e-6 * (1.0 + np.max(np.abs(x0), axis=0))
+        hv = 1e-6 * (1.0 + np.max(np.abs(v0), axis=0))
+        X0, V0 = [x0], [v0]
+        for j in range(m):            # perturbed starts, stacked into one batched simulation
+            e = np.zeros(m)
+            e[j] = hx[j]
+            X0.append(x0 + e)
+            V0.append(v0)
+        for j in range(m):
+            e = np.zeros(m)
+            e[j] = hv[j]
+            X0.append(x0)
+            V0.append(v0 + e)
+        if not self._fit_state:
+            P = g.windows(U, Y, starts, H, x0, v0)
+            idx = starts[None, :] + np.arange(1, H + 1)[:, None]
+            return np.mean((P - Y[idx]) ** 2 / self.norm, axis=(0, 2))
+        P = g.windows(U, Y, np.tile(starts, 2 * m + 1), H, np.vstack(X0), np.vstack(V0))
+        P = P.reshape(H, 2 * m + 1, W, m)
+        idx = starts[None, :] + np.arange(1, H + 1)[:, None]
+        scale = 1.0 / np.sqrt(self.norm)
+        r = (Y[idx] - P[:, 0]) * scale                              # (H, W, m)
+        steps = np.concatenate([hx, hv])
+        S = (P[:, 1:] - P[:, :1]) * scale / steps[None, :, None, None]   # (H, 2m, W, m)
+        A = np.transpose(S, (2, 0, 3, 1)).reshape(W, H * m, 2 * m)
+        bvec = np.transpose(r, (1, 0, 2)).reshape(W, H * m)
+        err = np.empty(W)
+        for w in range(W):
+            d = np.linalg.lstsq(A[w], bvec[w], rcond=None)[0]
+            res = bvec[w] - A[w] @ d
+            err[w] = float(res @ res) / (H * m)
+        return err
 
     def compare(self, simple, rich, tested: int, alpha: float) -> Comparison:
         """Is structure ``rich`` better than ``simple`` on held-out windows? Each is

@@ -23,7 +23,7 @@ import dataclasses
 import numpy as np
 
 from cdam_core.base.checks import as_2d
-from cdam_core.models.greybox.declared import DerivativeFilter
+from cdam_core.models.greybox.declared import DerivativeFilter, SignalFilters
 from cdam_core.models.greybox.effects import LIBRARY, Effect
 from cdam_core.models.greybox.estimation import apply_effects, design, fit as idim_fit
 from cdam_core.models.greybox.registry import MODEL_NAMES, get_model
@@ -100,6 +100,13 @@ class GreyBox(Model):
         m = get_model(self.declared, self.fixed)
         if self.dt is None or not np.isfinite(self.dt) or self.dt <= 0:
             raise ValueError(f"dt: the sample time must be a positive number, got {self.dt!r}")
+        if isinstance(self.cutoff_hz, dict):
+            for k, v in self.cutoff_hz.items():
+                if k not in m.positions:
+                    raise ValueError(f"filter.cutoff_per_signal_hz: {k!r} is not a position of "
+                                     f"{m.name} ({', '.join(m.positions)})")
+                if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
+                    raise ValueError(f"filter.cutoff_per_signal_hz.{k}: not a positive number")
         ext = set(self.extra_columns)
         channels = set(m.equation_names) | set(m.inputs) | set(getattr(m, "shared_delays", {}))
         for j, e in enumerate(self.effects):
@@ -119,6 +126,8 @@ class GreyBox(Model):
         return raw, extra
 
     def _filter(self, m) -> DerivativeFilter:
+        if isinstance(self.cutoff_hz, dict):
+            return SignalFilters.of(self.cutoff_hz, int(self.filter_order))
         return DerivativeFilter(m.default_cutoff_hz if self.cutoff_hz is None else self.cutoff_hz,
                                 int(self.filter_order))
 
@@ -271,14 +280,16 @@ class GreyBox(Model):
         s = apply_effects(m, sig, self.effects)
         return {e.key: e.columns(s) for e in wanted}
 
-    def _rollout(self, U, Y, starts: np.ndarray, steps: int, path: bool) -> np.ndarray:
-        """Integrate ``steps`` samples from the measured state at each row of ``starts``;
-        returns the final positions (W, m), or every step's (steps, W, m) with ``path``."""
+    def _rollout(self, U, Y, starts: np.ndarray, steps: int, path: bool,
+                 x0=None, v0=None) -> np.ndarray:
+        """Integrate ``steps`` samples from the measured state at each row of ``starts`` (or
+        from positions ``x0`` and velocities ``v0``, each (W, m)); returns the final positions
+        (W, m), or every step's (steps, W, m) with ``path``."""
         u_all, ex_all = self._inputs(U)
         pre_all = self._precomputed(U, Y)
         dt = float(self.dt)
-        x = Y[starts].astype(float)
-        v = (Y[starts] - Y[starts - 1]) / dt
+        x = Y[starts].astype(float) if x0 is None else np.array(x0, dtype=float)
+        v = (Y[starts] - Y[starts - 1]) / dt if v0 is None else np.array(v0, dtype=float)
         h = dt / self.substeps_
         out = np.empty((steps,) + x.shape) if path else None
         for j in range(steps):
@@ -295,9 +306,10 @@ class GreyBox(Model):
                 out[j] = x
         return out if path else x
 
-    def windows(self, U, Y, starts, steps: int) -> np.ndarray:
+    def windows(self, U, Y, starts, steps: int, x0=None, v0=None) -> np.ndarray:
         """Simulate ``steps`` samples from the measured state at each row of ``starts`` (one
-        segment ``U``, ``Y``: multiple shooting windows); returns the simulated positions
+        segment ``U``, ``Y``: multiple shooting windows), or from the given positions ``x0``
+        and velocities ``v0`` (each (len(starts), outputs)); returns the simulated positions
         (steps, len(starts), outputs) of rows ``start + 1 .. start + steps``."""
         self._check_fitted()
         U, Y = as_2d(U, "U"), as_2d(Y, "Y")
@@ -311,7 +323,11 @@ class GreyBox(Model):
         if steps < 1 or starts.min() < self.t0 - 1 or starts.max() + steps >= Y.shape[0]:
             raise ValueError(f"starts/steps: windows must lie in rows {self.t0 - 1}.."
                              f"{Y.shape[0] - 1} of the segment")
-        return self._rollout(U, Y, starts, steps, path=True)
+        W = (starts.size, self.n_outputs_)
+        for name, a in (("x0", x0), ("v0", v0)):
+            if a is not None and (np.shape(a) != W or not np.all(np.isfinite(a))):
+                raise ValueError(f"{name}: expected finite values of shape {W}")
+        return self._rollout(U, Y, starts, steps, True, x0, v0)
 
     def _one_step(self, U, Y):
         return self._k_step(U, Y, 1)[self.t0:]
@@ -341,7 +357,10 @@ class GreyBox(Model):
                 "n_inputs": self.n_inputs_, "n_outputs": self.n_outputs_,
                 "fixed": dict(self.fixed), "extra_columns": list(self.extra_columns),
                 "filter": {"cutoff_hz": float(self._filter(self._m).cutoff_hz),
-                           "order": int(self.filter_order)},
+                           "order": int(self.filter_order),
+                           **({"cutoff_per_signal_hz": {k: float(v) for k, v in
+                                                        self.cutoff_hz.items()}}
+                              if isinstance(self.cutoff_hz, dict) else {})},
                 "effects": [_effect_to_dict(e) for e in self.effects],
                 "parameters": {"names": names, "values": [self.theta_[p] for p in names],
                                "std": [self.std_.get(p) for p in names],
@@ -353,8 +372,10 @@ class GreyBox(Model):
         if d["declared"] not in MODEL_NAMES:
             raise ValueError(f"model.declared: unknown model {d['declared']!r}")
         effects = [_effect_from_dict(e, f"model.effects[{j}]") for j, e in enumerate(d["effects"])]
-        g = cls(d["declared"], float(d["dt"]), effects, d["fixed"], d["filter"]["cutoff_hz"],
-                int(d["filter"]["order"]), d["extra_columns"])
+        filt = d["filter"]
+        cut = filt.get("cutoff_per_signal_hz") or filt["cutoff_hz"]
+        g = cls(d["declared"], float(d["dt"]), effects, d["fixed"], cut,
+                int(filt["order"]), d["extra_columns"])
         try:
             m = g._structure()
         except ValueError as exc:

@@ -60,6 +60,34 @@ class DerivativeFilter:
         xd = np.gradient(xf, dt)
         return xf, xd, np.gradient(xd, dt)
 
+    def for_signal(self, name: str) -> "DerivativeFilter":
+        """The filter of one signal (the same for all)."""
+        return self
+
+
+@dataclass(frozen=True)
+class SignalFilters(DerivativeFilter):
+    """One cut-off per position signal (their encoders' noise differs); ``cutoff_hz`` is the
+    highest, used where one band is needed (the parallel filter, the spectral search range)."""
+
+    per_signal: tuple = ()     # ((signal, cutoff Hz), ...)
+
+    def for_signal(self, name: str) -> DerivativeFilter:
+        c = dict(self.per_signal).get(name, self.cutoff_hz)
+        return DerivativeFilter(c, self.order, self.padlen)
+
+    def describe(self) -> str:
+        each = ", ".join(f"{k} {v:.3g} Hz" for k, v in self.per_signal)
+        return (f"zero-phase Butterworth low-pass (scipy.signal.filtfilt), order {self.order}, "
+                f"cutoff per signal ({each}), then central differences (numpy.gradient)")
+
+    @classmethod
+    def of(cls, cutoffs: dict, order: int = 4, padlen=None) -> "SignalFilters":
+        items = tuple(sorted((str(k), float(v)) for k, v in cutoffs.items()))
+        if not items:
+            raise ValueError("cutoffs: empty")
+        return cls(max(v for _, v in items), order, padlen, items)
+
 
 class Signals(dict):
     """The prepared signals of one record: named arrays (``t``, ``tau``, ``q``, ``q_d``,
@@ -136,7 +164,7 @@ class GreyBoxModel:
         for p in self.positions:
             x = as_signal(raw[p], p, n)
             sig[p + "_raw"] = x
-            sig[p], sig[p + "_d"], sig[p + "_dd"] = filt.apply(x, dt)
+            sig[p], sig[p + "_d"], sig[p + "_dd"] = filt.for_signal(p).apply(x, dt)
         sig["extra"] = {}
         for k, v in (extra or {}).items():
             if k in self.signals:

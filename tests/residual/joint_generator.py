@@ -1,0 +1,145 @@
+"""A flexible-joint and rigid-axis data generator independent of ``cdam_core.sim``.
+
+Plain numpy with its own integrator (classical RK4 on a fine grid, the torque held over each
+sample as a DAC holds it), and conditions the project's simulator does not have: a joint in a
+horizontal or a vertical plane, open-loop torque or a PD position loop closed on the *measured*
+motor or link angle (so the torque is correlated with the measurement noise), coarse and noisy
+encoders, sampling from 250 Hz to 1 kHz, a timing skew between the two encoders, motor-side dry
+friction, a hardening cable and a periodic disturbance torque on the link.
+
+Motor:  Im thm'' + Dm thm' + Fc tanh(thm' / v_s) + tau_l = tau_m
+Cable:  tau_l = Ks d + K3 d^3 + Kd d',  d = thm - q
+Link:   I q'' + Dl q' + G sin q = tau_l + A sin(2 pi f t)
+
+The dry friction uses a steep tanh (v_s = 1 mrad/s) so RK4 stays smooth; the identified model's
+plain sign differs from it only below v_s.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+TRUTH = {"Im": 0.02, "Dm": 0.05, "Ks": 40.0, "Kd": 0.05, "I": 0.1, "Dl": 0.1}
+
+
+@dataclass
+class Joint:
+    fs: float = 1000.0              # sampling rate, Hz
+    duration: float = 20.0          # s
+    plane: str = "horizontal"       # "vertical": G = m g l acts on the link
+    G: float = 0.6                  # N m, used in the vertical plane
+    control: str = "open"           # "open", "motor" or "link" (PD on the measured angle)
+    motor_counts: int = 0           # encoder counts per revolution (0: ideal)
+    link_counts: int = 0
+    motor_noise: float = 0.0        # rad, white, added after quantisation
+    link_noise: float = 0.0
+    skew: float = 0.0               # s, the link encoder is latched this much earlier
+    Fc: float = 0.0                 # motor dry friction, N m
+    K3: float = 0.0                 # hardening cable, N m / rad^3
+    periodic: tuple = ()            # (amplitude N m, frequency Hz) on the link
+    substeps: int = 8
+    seed: int = 0
+    params: dict = field(default_factory=lambda: dict(TRUTH))
+
+    def truth(self) -> dict:
+        out = dict(self.params)
+        out["G"] = self.G if self.plane == "vertical" else 0.0
+        return out
+
+    # -- the plant --------------------------------------------------------------------------
+    def _deriv(self, x, u, t):
+        p = self.params
+        thm, q, vm, vq = x
+        d, dd = thm - q, vm - vq
+        tl = p["Ks"] * d + self.K3 * d ** 3 + p["Kd"] * dd
+        g = self.G if self.plane == "vertical" else 0.0
+        dist = self.periodic[0] * np.sin(2 * np.pi * self.periodic[1] * t) if self.periodic else 0.0
+        am = (u - p["Dm"] * vm - self.Fc * np.tanh(vm / 1e-3) - tl) / p["Im"]
+        aq = (tl - p["Dl"] * vq - g * np.sin(q) + dist) / p["I"]
+        return np.array([vm, vq, am, aq])
+
+    def _measure(self, x, counts, noise, rng):
+        if counts:
+            res = 2 * np.pi / counts
+            x = np.round(x / res) * res
+        return x + rng.normal(0.0, noise) if noise else x
+
+    def record(self) -> dict:
+        rng = np.random.default_rng(self.seed)
+        dt = 1.0 / self.fs
+        n = int(round(self.duration * self.fs))
+        t = np.arange(n) * dt
+        # excitation: a multisine with random phases, 0.2..8 Hz (torque or angle reference)
+        freqs = np.array([0.2, 0.45, 0.9, 1.7, 3.1, 5.3, 8.0])
+        ph = rng.uniform(0, 2 * np.pi, freqs.size)
+        ref = np.sum(np.sin(2 * np.pi * freqs[None, :] * t[:, None] + ph) / (1 + freqs), axis=1)
+        h = dt / self.substeps
+        skew_steps = int(round(self.skew / h))
+        hist_q = [0.0] * (skew_steps + 1)   # fine-grid link angles for the skewed latch
+        x = np.zeros(4)
+        if self.plane == "vertical":
+            x[:2] = 0.0
+        tau = np.zeros(n)
+        thm_m, q_m = np.zeros(n), np.zeros(n)
+        prev = None
+        for k in range(n):
+            thm_m[k] = self._measure(x[0], self.motor_counts, self.motor_noise, rng)
+            q_m[k] = self._measure(hist_q[0], self.link_counts, self.link_noise, rng)
+            if self.control == "open":
+                u = 0.6 * ref[k]
+            else:
+                y = thm_m[k] if self.control == "motor" else q_m[k]
+                r = 0.5 * ref[k]
+                vel = 0.0 if prev is None else (y - prev) / dt
+                prev = y
+                kp, kd = (2.0, 0.08) if self.control == "motor" else (1.0, 0.1)
+                u = kp * (r - y) - kd * vel
+                if self.plane == "vertical":
+                    u += self.G * np.sin(r)   # gravity feed-forward on the reference
+            tau[k] = u
+            for _ in range(self.substeps):
+                tk = k * dt
+                k1 = self._deriv(x, u, tk)
+                k2 = self._deriv(x + 0.5 * h * k1, u, tk + 0.5 * h)
+                k3 = self._deriv(x + 0.5 * h * k2, u, tk + 0.5 * h)
+                k4 = self._deriv(x + h * k3, u, tk + h)
+                x = x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+                hist_q.append(x[1])
+                hist_q.pop(0)
+        return {"t": t, "tau_m": tau, "theta_m": thm_m, "q": q_m, "truth": self.truth()}
+
+
+def rigid_axis(fs=1000.0, duration=20.0, M=0.5, Fv=2.0, Fc=1.0, offset=0.0, counts=0,
+               noise=0.0, seed=0) -> dict:
+    """A rigid axis M q'' + Fv q' + Fc tanh(q' / 1 mrad/s) + offset = tau, open-loop multisine
+    torque held over each sample, RK4 on a fine grid."""
+    rng = np.random.default_rng(seed)
+    dt = 1.0 / fs
+    n = int(round(duration * fs))
+    t = np.arange(n) * dt
+    freqs = np.array([0.3, 0.7, 1.3, 3.1, 6.0])
+    ph = rng.uniform(0, 2 * np.pi, freqs.size)
+    u = np.sum(3.0 * np.sin(2 * np.pi * freqs[None, :] * t[:, None] + ph) / (1 + freqs), axis=1)
+
+    def f(x, uk):
+        return np.array([x[1], (uk - offset - Fv * x[1] - Fc * np.tanh(x[1] / 1e-3)) / M])
+    x = np.zeros(2)
+    q = np.zeros(n)
+    sub = 8
+    h = dt / sub
+    for k in range(n):
+        q[k] = x[0]
+        for _ in range(sub):
+            k1 = f(x, u[k])
+            k2 = f(x + 0.5 * h * k1, u[k])
+            k3 = f(x + 0.5 * h * k2, u[k])
+            k4 = f(x + h * k3, u[k])
+            x = x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+    if counts:
+        res = 2 * np.pi / counts
+        q = np.round(q / res) * res
+    if noise:
+        q = q + rng.normal(0.0, noise, n)
+    return {"t": t, "tau": u, "q": q,
+            "truth": {"M": M, "Fv": Fv, "Fc": Fc, "offset": offset}}
