@@ -18,6 +18,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import math
+
 import numpy as np
 
 TRUTH = {"Im": 0.02, "Dm": 0.05, "Ks": 40.0, "Kd": 0.05, "I": 0.1, "Dl": 0.1}
@@ -38,7 +40,7 @@ class Joint:
     Fc: float = 0.0                 # motor dry friction, N m
     K3: float = 0.0                 # hardening cable, N m / rad^3
     periodic: tuple = ()            # (amplitude N m, frequency Hz) on the link
-    substeps: int = 8
+    substeps: int = 4
     seed: int = 0
     params: dict = field(default_factory=lambda: dict(TRUTH))
 
@@ -54,10 +56,11 @@ class Joint:
         d, dd = thm - q, vm - vq
         tl = p["Ks"] * d + self.K3 * d ** 3 + p["Kd"] * dd
         g = self.G if self.plane == "vertical" else 0.0
-        dist = self.periodic[0] * np.sin(2 * np.pi * self.periodic[1] * t) if self.periodic else 0.0
-        am = (u - p["Dm"] * vm - self.Fc * np.tanh(vm / 1e-3) - tl) / p["Im"]
-        aq = (tl - p["Dl"] * vq - g * np.sin(q) + dist) / p["I"]
-        return np.array([vm, vq, am, aq])
+        dist = self.periodic[0] * math.sin(2 * math.pi * self.periodic[1] * t) \
+            if self.periodic else 0.0
+        am = (u - p["Dm"] * vm - self.Fc * math.tanh(vm / 1e-3) - tl) / p["Im"]
+        aq = (tl - p["Dl"] * vq - g * math.sin(q) + dist) / p["I"]
+        return (vm, vq, am, aq)
 
     def _measure(self, x, counts, noise, rng):
         if counts:
@@ -77,9 +80,7 @@ class Joint:
         h = dt / self.substeps
         skew_steps = int(round(self.skew / h))
         hist_q = [0.0] * (skew_steps + 1)   # fine-grid link angles for the skewed latch
-        x = np.zeros(4)
-        if self.plane == "vertical":
-            x[:2] = 0.0
+        x = [0.0, 0.0, 0.0, 0.0]
         tau = np.zeros(n)
         thm_m, q_m = np.zeros(n), np.zeros(n)
         prev = None
@@ -98,13 +99,14 @@ class Joint:
                 if self.plane == "vertical":
                     u += self.G * np.sin(r)   # gravity feed-forward on the reference
             tau[k] = u
-            for _ in range(self.substeps):
-                tk = k * dt
+            for j in range(self.substeps):
+                tk = k * dt + j * h
                 k1 = self._deriv(x, u, tk)
-                k2 = self._deriv(x + 0.5 * h * k1, u, tk + 0.5 * h)
-                k3 = self._deriv(x + 0.5 * h * k2, u, tk + 0.5 * h)
-                k4 = self._deriv(x + h * k3, u, tk + h)
-                x = x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+                k2 = self._deriv([a + 0.5 * h * b for a, b in zip(x, k1)], u, tk + 0.5 * h)
+                k3 = self._deriv([a + 0.5 * h * b for a, b in zip(x, k2)], u, tk + 0.5 * h)
+                k4 = self._deriv([a + h * b for a, b in zip(x, k3)], u, tk + h)
+                x = [a + h / 6.0 * (b1 + 2 * b2 + 2 * b3 + b4)
+                     for a, b1, b2, b3, b4 in zip(x, k1, k2, k3, k4)]
                 hist_q.append(x[1])
                 hist_q.pop(0)
         return {"t": t, "tau_m": tau, "theta_m": thm_m, "q": q_m, "truth": self.truth()}

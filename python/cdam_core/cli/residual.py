@@ -94,7 +94,10 @@ def run(args) -> int:
         for f in js["findings"]:
             print(f"found {f['effect']} on {f['channel']}: {f['parameters']}")
         for u in js["unexplained"]:
-            print(f"unexplained structure on {u['channel']} at {u['frequency_hz']:.1f} Hz")
+            what = ("a periodic component not in the inputs" if u["kind"] == "periodic_line"
+                    else "unexplained structure")
+            print(f"{what} on {u['channel']} at {u['frequency_hz']:.2f} Hz"
+                  + (f", amplitude {u['amplitude']:.3g}" if "amplitude" in u else ""))
         for label, sc in (js.get("test") or {}).get("scores", {}).items():
             print(f"test simulation ({label} model): " + (
                 ", ".join(f"{o} rmse {v:.4g}" for o, v in zip(js["test"]["outputs"], sc["rmse"]))

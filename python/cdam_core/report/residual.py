@@ -182,12 +182,17 @@ def write_report(sel: Selection, out_dir, title: str | None = None, source: str 
     lines += [f"| {k} | {v:.6g} |" for k, v in sel.final.theta.items()]
     lines += ["", "## Unexplained structure", ""]
     if sel.unexplained:
-        lines += ["| channel | frequency [Hz] | prominence [decades] |", "|---|---|---|"]
-        lines += [f"| {u['channel']} | {u['frequency_hz']:.1f} | {u['prominence_decades']:.2f} |"
+        lines += ["| channel | kind | frequency [Hz] | strength |", "|---|---|---|---|"]
+        lines += [f"| {u['channel']} | {u['kind']} | {u['frequency_hz']:.2f} | "
+                  + (f"{u['prominence_decades']:.2f} decades above its base"
+                     if "prominence_decades" in u else
+                     f"amplitude {u['amplitude']:.3g} (x{u['ratio_to_background']:.3g} "
+                     f"the background, p {u['p_value']:.2g})") + " |"
                   for u in sel.unexplained]
         lines += ["", "No library effect explains these; they are reported, not fitted."]
     else:
-        lines += ["None found (no spectral peak of 1 decade or more)."]
+        lines += ["None found (no spectral peak of 1 decade or more, no periodic line outside "
+                  "the inputs' own lines)."]
     _figure_spectrum(out / "spectrum.png", sel)
     lines += ["", "![spectrum](spectrum.png)", ""]
     write_text_atomic(out / "index.md", "\n".join(lines))

@@ -378,8 +378,26 @@ def select(model, sig: dict, candidates, alpha: float = 0.01, max_steps: int | N
             ac = dg.autocorrelation(r, lags)
             unexplained.append({"kind": "spectral_peak", "channel": eq, **pk,
                                 "acf_lags_outside_band": len(ac["outside"])})
+    # narrow periodic components at the record's full resolution; a line also found in a
+    # measured input is the model's error at an excitation frequency, one that is not is a
+    # periodic disturbance nobody declared
+    input_lines, at_inputs = [], []
+    for u in model.inputs:
+        x = np.asarray(sig[u], dtype=float)[current.keep] if u in sig else np.zeros(0)
+        if x.size >= 64 and np.std(x) > 0:
+            input_lines += [d["frequency_hz"] for d in dg.spectral_lines(x, fs, alpha)]
+    for eq, r in current.residuals.items():
+        if np.std(r) == 0 or r.size < 64:
+            continue
+        for ln in dg.spectral_lines(r, fs, alpha, fmax=fmax):
+            # within the Hann window's main lobe (2 bins): not separable from the input's line
+            near = any(abs(ln["frequency_hz"] - fu) <= 2 * ln["resolution_hz"]
+                       for fu in input_lines)
+            (at_inputs if near else unexplained).append(
+                {"kind": "periodic_line", "channel": eq, **ln})
     settings = {"declared_effects": sorted(dkeys), "removed_in_backward_pass": removed,
                 "validation": cv_info, "declared_terms_dropped": dropped_terms,
+                "residual_lines_at_input_frequencies": at_inputs,
                 "alpha": alpha, "min_gain": min_gain, "trim": trim, "lags": lags, "min_prominence_decades": min_prominence,
                 "candidates": [c.key for c in candidates]}
     return Selection(model, declared, current, steps, declared_error, white, unexplained,
