@@ -6,6 +6,8 @@ import importlib
 import importlib.util
 import sys
 
+from cdam_core import __version__
+
 # Command modules in the order `cdam --help` lists them. A module that is not present yet
 # (a command still being built) is skipped; one that is present but fails to import is an error.
 COMMANDS = [
@@ -29,6 +31,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="cdam",
         description="Identify, check and fly the dynamics of a cable-driven aerial manipulator.",
         formatter_class=argparse.RawDescriptionHelpFormatter, epilog=EXIT_CODES)
+    parser.add_argument("--version", action="version", version=f"cdam {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMANDS:
         modname = f"cdam_core.cli.{name}"
