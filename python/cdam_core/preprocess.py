@@ -5,6 +5,7 @@ import numpy as np
 
 from cdam_core import _core
 from cdam_core.base.checks import as_float_array, positive_int
+from cdam_core.base.estimator import EstimatorParams
 
 __all__ = ["five_point_cubic_smooth", "smooth_pair", "MinMaxScaler"]
 
@@ -32,27 +33,37 @@ def smooth_pair(U, Y, passes: int):
     return five_point_cubic_smooth(U, passes), five_point_cubic_smooth(Y, passes)
 
 
-class MinMaxScaler:
+class MinMaxScaler(EstimatorParams):
     """Per-column min-max scaling to [-1, 1] (MATLAB mapminmax), fitted on training data only.
 
     A constant column (max == min) transforms to 0 and inverse-transforms to its constant.
+    A scikit-learn transformer (``fit(X, y=None)``, ``transform``, ``fit_transform``,
+    ``inverse_transform``; usable in a ``Pipeline``); it has no parameters.
     """
 
-    def __init__(self):
-        self.data_min_ = None
-        self.data_max_ = None
+    _estimator_type = "transformer"
 
-    def fit(self, X) -> "MinMaxScaler":
+    def __init__(self):
+        pass
+
+    def fit(self, X, y=None) -> "MinMaxScaler":
         arr = as_float_array(X, "X", ndim=(2,))
         self.data_min_, self.data_max_ = _core.minmax_fit(arr)
         return self
 
+    def is_fitted(self) -> bool:
+        return getattr(self, "data_min_", None) is not None
+
+    def _n_features(self) -> int:
+        return self.data_min_.shape[0]
+
     def _check(self, X, name):
-        if self.data_min_ is None:
+        if not self.is_fitted():
             raise ValueError("MinMaxScaler: not fitted; call fit(X) first")
         arr = as_float_array(X, name, ndim=(2,), dtype=self.data_min_.dtype)
         if arr.shape[1] != self.data_min_.shape[0]:
-            raise ValueError(f"{name}: expected {self.data_min_.shape[0]} columns, got {arr.shape[1]}")
+            raise ValueError(f"{name}: expected {self.data_min_.shape[0]} columns, "
+                             f"got {arr.shape[1]}")
         return arr
 
     def transform(self, X) -> np.ndarray:
@@ -61,5 +72,5 @@ class MinMaxScaler:
     def inverse_transform(self, X) -> np.ndarray:
         return _core.minmax_apply(self._check(X, "X"), self.data_min_, self.data_max_, True)
 
-    def fit_transform(self, X) -> np.ndarray:
+    def fit_transform(self, X, y=None) -> np.ndarray:
         return self.fit(X).transform(X)

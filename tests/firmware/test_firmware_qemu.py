@@ -14,22 +14,20 @@ import numpy as np
 import pytest
 
 from cdam_core import firmware as fw
-from cdam_core.record.realdata import shared_data_dir
+from cdam_core.record.realdata import real_record
 from cdam_core.models.file import save_model
 
 pytestmark = [pytest.mark.slow,
               pytest.mark.skipif(fw.toolchain_available() is not None,
                                  reason=f"firmware toolchain: {fw.toolchain_available()}")]
 
-DATA = shared_data_dir() / "ardrone2"   # honours CDAM_SHARED_DATA
-
-
 def _flight_inputs():
-    """Six channels of the recorded AR.Drone 2.0 flight: four motor PWMs, roll, pitch."""
+    """Six channels of the recorded AR.Drone 2.0 flight: four motor PWMs, roll, pitch (data/
+    first, then CDAM_SHARED_DATA or ../shared; it ships in data/, so missing is a failure)."""
     import scipy.io as sio
-    path = DATA / "expData10_29_25.mat"
+    path = real_record("ardrone2/expData10_29_25.mat")
     if not path.is_file():
-        pytest.skip(f"recorded flight not found at {path}")
+        pytest.fail(f"recorded flight not found at {path} (data/README.md)")
     o = sio.loadmat(path, squeeze_me=True, struct_as_record=False)["expData"].origData
     return np.column_stack([o.navMotor.T.astype(float), o.navOrient[:2].T.astype(float)])
 

@@ -1,4 +1,4 @@
-"""Real data: the AR.Drone 2.0 flight (../shared/data/ardrone2; tud-cor/ardrone2_dem_filter,
+"""Real data: the AR.Drone 2.0 flight (data/ardrone2; tud-cor/ardrone2_dem_filter,
 Apache-2.0). Identify on the first 75 %, test on the last 25 % (decimated to 30 Hz).
 
 The baselines are computed here independently with numpy least squares and their own
@@ -9,15 +9,12 @@ import pytest
 from cdam_core.evaluate import evaluate
 from cdam_core.identify import IdentifyConfig, identify, select_structure
 
-ardrone2 = pytest.importorskip("cdam_core.record.realdata.ardrone2")
+from cdam_core.record.realdata import ardrone2
 
 
 @pytest.fixture(scope="module")
-def split():
-    try:
-        ds = ardrone2.load_ardrone2()
-    except FileNotFoundError:
-        pytest.skip("shared AR.Drone data not present")
+def split(bundled_record):
+    ds = ardrone2.load_ardrone2(bundled_record(ardrone2.ARDRONE2_FILE))   # ships in data/
     U, Y = ds.select(ds.inputs)[::4], ds.select(ds.outputs)[::4]
     n = int(0.75 * len(U))
     return U[:n], Y[:n], U[n:], Y[n:], ds.outputs

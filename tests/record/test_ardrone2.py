@@ -4,20 +4,18 @@ import pytest
 from scipy.io import loadmat
 
 from cdam_core.record.dataset import read_dataset, write_dataset
-from cdam_core.record.realdata import shared_data_dir
 from cdam_core.record.realdata.ardrone2 import ARDRONE2_FILE, load_ardrone2
 
-MAT = shared_data_dir() / ARDRONE2_FILE
-pytestmark = pytest.mark.skipif(not MAT.is_file(), reason="shared AR.Drone data not found")
+
+@pytest.fixture(scope="module")
+def raw(bundled_record):
+    """The raw arrays; the record ships in data/ardrone2, so missing is a failure."""
+    mat = bundled_record(ARDRONE2_FILE)
+    return loadmat(str(mat), squeeze_me=True, struct_as_record=False)["expData"].origData
 
 
 @pytest.fixture(scope="module")
-def raw():
-    return loadmat(str(MAT), squeeze_me=True, struct_as_record=False)["expData"].origData
-
-
-@pytest.fixture(scope="module")
-def ds():
+def ds(raw):
     return load_ardrone2()
 
 

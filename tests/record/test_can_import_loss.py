@@ -106,7 +106,7 @@ def test_one_bad_line_in_the_middle_is_skipped_and_named(tmp_path, capsys, case)
     log.write_text("".join(lines))
     code, out, err, csv = _import(tmp_path, log, capsys)
     assert code == 1, err                                    # written, but incomplete
-    assert f"skipped lines: 1 (line {bad + 1})" in out
+    assert f"warning: skipped lines: 1 (line {bad + 1})" in err   # warnings: stderr
     rec, meta = _read(csv)
     assert meta["skipped_lines"]["count"] == 1
     assert meta["skipped_lines"]["lines"][0]["line"] == bad + 1
@@ -138,7 +138,7 @@ def test_one_frame_stamped_far_off_is_excluded_alone(tmp_path, capsys, shift):
     _write_candump(log, _frames(truth, stamp={(1, k): float(truth[1]["t"][k] + shift)}))
     code, out, err, csv = _import(tmp_path, log, capsys)
     assert code == 1, err
-    assert "excluded frames: m1: 1 out of order" in out
+    assert "excluded frames: m1: 1 out of order" in err
     rec, meta = _read(csv)
     assert meta["excluded"]["m1"]["out_of_order"]["count"] == 1
     keep = np.ones(N, bool)
@@ -181,7 +181,7 @@ def test_a_nan_first_timestamp_is_named_and_the_rest_kept(tmp_path, capsys, writ
     writer(log, frames)
     code, out, err, csv = _import(tmp_path, log, capsys)
     assert code == 1, err
-    assert "excluded frames: 1 with a NaN/Inf timestamp" in out
+    assert "excluded frames: 1 with a NaN/Inf timestamp" in err
     rec, meta = _read(csv)
     assert meta["malformed"]["non_finite_time"] == 1
     keep = np.ones(N, bool)
@@ -195,7 +195,7 @@ def test_a_clean_log_exits_0_and_loses_nothing(tmp_path, capsys):
     _write_candump(log, _frames(truth))
     code, out, err, csv = _import(tmp_path, log, capsys)
     assert code == 0, err
-    assert "incomplete" not in out
+    assert "incomplete" not in out + err and "warning" not in err
     rec, meta = _read(csv)
     assert meta["gap_samples"] == 0 and meta["skipped_lines"]["count"] == 0
     _check_theta(rec, meta, truth, 1)

@@ -152,7 +152,7 @@ def test_import_can_reports_a_log_cut_by_a_kill(tmp_path, capsys):
     with open(log, "a") as f:
         f.write("(1000.06")                       # a line cut mid-write
     assert main(["import-can", str(log), "-o", str(tmp_path / "j.csv")]) == 0
-    out = capsys.readouterr().out
-    assert "partial record" in out and f"{len(msgs)} frames" in out
+    cap = capsys.readouterr()
+    assert "partial record" in cap.err and f"{len(msgs)} frames" in cap.out
     ds = read_dataset(tmp_path / "j.csv")
     assert ds.meta["log_truncated"]

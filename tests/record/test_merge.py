@@ -146,3 +146,58 @@ def test_a_joints_dropout_stays_a_gap():
     # steps with linear interpolation: error below 1e-6 rad away from the gap)
     np.testing.assert_allclose(merged.column("tau_m1"), np.cos(merged.t - est.offset),
                                atol=1e-6)
+
+
+# -- is the alignment meaningful? (issue 22: merge accepted a correlation of -0.013) -----------
+
+def _unrelated(seed):
+    """A flight and a joints record whose motions are independent smooth signals."""
+    flight, _ = _records(seed)
+    _, joints = _records(seed + 500)
+    return flight, joints
+
+
+def test_unrelated_smooth_signals_are_refused_at_the_stated_rate():
+    """16 independent pairs: at alpha 0.01 at most one may pass (P(>= 2) < 1.2 %), although
+    their peaks (|r| about 0.2) are far beyond what n independent samples allow: the test
+    below, on the raw sample count, calls every one of them significant."""
+    from scipy import stats
+    passed, naive = 0, 0
+    for seed in range(16):
+        f, j = _unrelated(seed)
+        est = estimate_offset(f.t, f.column("phi"), j.t, j.column("theta_m1"))
+        passed += est.p_value <= 0.01
+        n = 12000 * 0.75                           # most of the 60 s at 200 Hz overlaps
+        r = abs(est.correlation)
+        naive += 2 * stats.t.sf(r * np.sqrt((n - 2) / (1 - r * r)), n - 2) <= 0.01
+    assert passed <= 1
+    assert naive >= 14
+
+
+@pytest.mark.parametrize("noise", [0.02, 2.0])
+def test_one_motion_is_accepted_even_noisy(noise):
+    flight, joints = _records(seed=4, noise=noise)
+    est = estimate_offset(flight.t, flight.column("phi"), joints.t, joints.column("theta_m1"))
+    assert est.p_value < 1e-6
+    ds, _ = merge_records(flight, joints, pair=("phi", "theta_m1"))
+    assert ds.meta["clock_offset"]["significant"] is True
+
+
+def test_merge_cli_refuses_a_weak_alignment_unless_forced(tmp_path, capsys):
+    flight, joints = _unrelated(1)
+    fp, jp, out = tmp_path / "flight.csv", tmp_path / "joints.csv", tmp_path / "record.csv"
+    write_dataset(fp, flight)
+    write_dataset(jp, joints)
+    argv = ["merge", str(fp), str(jp), "-o", str(out), "--pair", "phi:theta_m1"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "not significant" in err and "--force" in err and len(err.strip().splitlines()) == 1
+    assert not out.exists() and not out.with_suffix(".json").exists()
+    assert main(argv + ["--force", "--json", str(tmp_path / "m.json"),
+                        "--report", str(tmp_path / "rep")]) == 0
+    cap = capsys.readouterr()
+    assert "warning" in cap.err and "warning" not in cap.out
+    assert read_dataset(out).meta["clock_offset"]["significant"] is False
+    js = __import__("json").loads((tmp_path / "m.json").read_text())
+    assert js["clock_offset"]["p_value"] > 0.01
+    assert (tmp_path / "rep" / "index.md").is_file()

@@ -3,11 +3,14 @@
 import numpy as np
 import pytest
 
-from cdam_core.record.realdata import shared_data_dir
 from cdam_core.record.realdata.emps import load_emps
 
-pytestmark = pytest.mark.skipif(not (shared_data_dir() / "emps").is_dir(),
-                                reason="shared EMPS data not found")
+
+@pytest.fixture(autouse=True, scope="module")
+def _records_present(bundled_record):
+    """The EMPS records ship in data/emps: missing is a failure, not a skip."""
+    bundled_record("emps/DATA_EMPS.mat")
+    bundled_record("emps/DATA_EMPS_PULSES.mat")
 
 PUBLISHED = {"M": 95.1089, "Fv": 203.5034, "Fc": 20.3935, "offset": -3.1648}
 PUBLISHED_ASYM = {"Fv_pos": 166.71, "Fc_pos": 20.144, "Fv_neg": 240.42, "Fc_neg": 20.628}

@@ -1,15 +1,19 @@
-"""What every command shares: the error types and exit codes, the output-path check, order
-parsing, JSON out."""
+"""What every command shares: the error types and exit codes, the help layout (defaults
+shown), the output-path check, order parsing, JSON out, warnings and progress on stderr."""
 from __future__ import annotations
 
+import argparse
 import os
+import sys
 from pathlib import Path
 
 from cdam_core.base.folders import FolderError, writable_folder
 from cdam_core.base.jsonio import write_json_atomic
 from cdam_core.base.orders import parse_orders
 
-__all__ = ["CliError", "CliIOError", "EXIT_CODES", "check_io", "parse_narx", "write_json"]
+__all__ = ["CliError", "CliIOError", "EXIT_CODES", "CdamParser", "HelpFormatter",
+           "add_outputs", "check_io", "parse_narx", "write_json", "warn", "note",
+           "show_progress"]
 
 EXIT_CODES = """exit codes:
   0    done
@@ -19,6 +23,71 @@ EXIT_CODES = """exit codes:
   4    internal error (a bug: please report it)
   130  interrupted (Ctrl-C)
 Every failure is one line on stderr: 'cdam COMMAND: error: ...'."""
+
+
+class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Every option's default in --help, once: appended as '(default: X)' unless the help
+    already states its default, the option is a flag, or it has none (None: see its help).
+    A description or epilog with line breaks is kept as written (examples), others wrapped."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        if ("default" in text.lower() or action.nargs == 0 or action.default is None
+                or action.default is argparse.SUPPRESS or action.default == []):
+            return text
+        return super()._get_help_string(action)
+
+    def _fill_text(self, text, width, indent):
+        if "\n" in text:
+            return "".join(indent + line for line in text.splitlines(keepends=True))
+        return super()._fill_text(text, width, indent)
+
+
+class CdamParser(argparse.ArgumentParser):
+    """The parser of `cdam` and of every command under it (argparse makes sub-parsers of the
+    parent's class): one help layout for all, set here once."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs["formatter_class"] = HelpFormatter
+        super().__init__(*args, **kwargs)
+
+    def _add_action(self, action):
+        # an option given no help still shows its default
+        if (action.help is None and action.option_strings and action.nargs != 0
+                and action.default not in (None, argparse.SUPPRESS)):
+            action.help = "default: %(default)s"
+        return super()._add_action(action)
+
+
+def add_outputs(p, json: bool = True, quiet: bool = True, report: bool = True) -> None:
+    """The outputs every computing command offers, with one wording: --json FILE, --quiet,
+    --report DIR."""
+    if json:
+        p.add_argument("--json", metavar="FILE", default=None,
+                       help="also write the results as JSON to FILE")
+    if quiet:
+        p.add_argument("--quiet", action="store_true",
+                       help="no progress and no notes on stderr (warnings stay)")
+    if report:
+        p.add_argument("--report", metavar="DIR", default=None,
+                       help="write a report (index.md, figures) into DIR")
+
+
+def warn(command: str, msg: str) -> None:
+    """A warning: on stderr, never mixed with the results on stdout."""
+    print(f"cdam {command}: warning: {msg}", file=sys.stderr)
+
+
+def note(args, msg: str) -> None:
+    """A note (where a file went, what runs now): on stderr, silenced by --quiet."""
+    if not getattr(args, "quiet", False):
+        print(f"cdam {args.command}: {msg}", file=sys.stderr, flush=True)
+
+
+def show_progress(args) -> bool:
+    """Progress bars only for a person watching: not with --quiet, not when stderr is a
+    file or pipe (a log, CI)."""
+    return not getattr(args, "quiet", False) and sys.stderr.isatty()
 
 
 class CliError(Exception):

@@ -3,7 +3,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from cdam_core.cli.common import CliError, check_io, parse_narx, write_json
+from cdam_core.cli.common import (CliError, check_io, note, parse_narx, show_progress,
+                                  write_json)
 
 
 def register(subparsers) -> None:
@@ -18,8 +19,11 @@ def register(subparsers) -> None:
     g.add_argument("--split", type=float, default=None,
                    help="fraction of TRAIN used for training; the rest is the test record")
     p.add_argument("--validate", help="validation record (dataset CSV)")
-    p.add_argument("--algo", default="all", choices=["iboa", "boa", "cabc", "bp", "all"])
-    p.add_argument("--seeds", type=int, default=10, help="seeds per algorithm (default 10)")
+    p.add_argument("--algo", default="iboa", choices=["iboa", "boa", "cabc", "bp", "all"],
+                   help="algorithm; all: the four, compared by a rank-sum test (use --seeds 4 "
+                        "or more)")
+    p.add_argument("--seeds", type=int, default=1,
+                   help="seeds per algorithm (seeds 0..N-1)")
     p.add_argument("--hidden", type=int, default=20)
     p.add_argument("--narx", default=None, help="NARX orders na,nb,nk (default: static map)")
     p.add_argument("--model", default="bp", choices=["bp", "hybrid"],
@@ -44,8 +48,6 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    import sys
-
     from cdam_core.record.dataset import read_dataset
     from cdam_core.evaluate import compare
     from cdam_core.identify import IdentifyConfig
@@ -90,19 +92,16 @@ def run(args) -> int:
                          model=args.model, features=args.features)
     algos = ["iboa", "boa", "cabc", "bp"] if args.algo == "all" else [args.algo]
     comparison = compare(algos, U, Y, records=records, seeds=range(args.seeds), config=cfg,
-                         names=train.outputs, progress=not args.quiet)
+                         names=train.outputs, progress=show_progress(args))
     result, models = comparison.result, comparison.models
     result["inputs"] = train.inputs
     result["train_file"] = str(args.train)
-    summary = result["summary"]
-    for algo in algos:
-        s = summary[algo]
-        rec = s["records"]["test"]
-        mode = "free_run" if "free_run" in rec else "one_step"
-        rs = ", ".join(f"{o} {rec[mode][o]['r']['mean']:.3f}" for o in train.outputs
-                       if rec[mode][o]["r"]["mean"] is not None)
-        print(f"{algo:5s} fitness {s['fitness']['mean']:.4f} ± {s['fitness']['std']:.4f}  "
-              f"time {s['seconds']['mean']:.2f} s  test r ({mode}): {rs}")
+    from cdam_core.evaluate.baselines import naive_and_arx
+    from cdam_core.report.identify import headline
+    result["baselines"] = naive_and_arx(U, Y, records, train.outputs, narx=cfg.narx,
+                                        smoothing_passes=cfg.smoothing_passes,
+                                        features=cfg.features)
+    print("\n".join(headline(result)))
     for other, entry in result.get("rank_sum", {}).items():
         for score, v in entry.items():
             print(f"IBOA vs {other} on {score}: p = {v['p_value']:.3g} "
@@ -113,10 +112,10 @@ def run(args) -> int:
         from cdam_core.report.identify import write_report
         md = write_report(comparison, args.report, records=records, times=times,
                           title=f"Identification of {Path(args.train).name}")
-        print(f"report: {md}", file=sys.stderr)
+        note(args, f"report: {md}")
     if args.save:
         from cdam_core.models.file import save_model
         save_model(args.save, models[algos[0]], inputs=train.inputs, outputs=train.outputs,
                    smoothing_passes=args.smoothing)
-        print(f"model: {args.save}", file=sys.stderr)
+        note(args, f"model: {args.save}")
     return 0

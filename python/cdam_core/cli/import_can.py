@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from cdam_core.cli.common import EXIT_CODES, CliError, check_io
+from cdam_core.cli.common import EXIT_CODES, CliError, check_io, warn
 
 EPILOG = """what is lost is counted, never hidden:
   skipped lines   text-log lines that cannot be parsed (bad hex, stray text, bad base64),
@@ -74,30 +74,32 @@ def run(args) -> int:
     print(f"{sum(rec.counts.values())} frames: {dict(rec.counts)}")
     print(f"malformed: {rec.malformed}")
     if report["truncated"]:
-        print(f"log ends in a partial record (cut line not read): {report['truncated']}")
+        warn("import-can", f"log ends in a partial record (cut line not read): "
+                           f"{report['truncated']}")
     skipped = report["skipped_lines"]
     if skipped:
         where = ", ".join(str(s["line"]) for s in report["skipped"])
         more = "" if skipped <= len(report["skipped"]) else ", ..."
-        print(f"skipped lines: {skipped} (line {where}{more}); first: "
-              f"{report['skipped'][0]['reason']}")
+        warn("import-can", f"skipped lines: {skipped} (line {where}{more}); first: "
+                           f"{report['skipped'][0]['reason']}")
     nonfinite = rec.malformed["non_finite_time"]
     if nonfinite:
-        print(f"excluded frames: {nonfinite} with a NaN/Inf timestamp")
+        warn("import-can", f"excluded frames: {nonfinite} with a NaN/Inf timestamp")
     n_excl = 0
     for joint, ex in m["excluded"].items():
         for kind, v in ex.items():
             if v["count"]:
                 n_excl += v["count"]
                 times = ", ".join(f"{x:.6f}" for x in v["times"][:5])
-                print(f"excluded frames: {joint}: {v['count']} {kind.replace('_', ' ')} "
-                      f"(timestamps {times}{', ...' if v['count'] > 5 else ''})")
+                warn("import-can", f"excluded frames: {joint}: {v['count']} "
+                                   f"{kind.replace('_', ' ')} (timestamps {times}"
+                                   f"{', ...' if v['count'] > 5 else ''})")
     gaps = {k: len(v) for k, v in m["gaps"].items()}
     print(f"{len(ds)} samples at {args.rate:g} Hz in {len(m['gapless_rows'])} segment(s), "
           f"{ds.t[-1]:.3f} s; gaps > {args.gap:g} ms: {gaps}, gap samples left out: "
           f"{m['gap_samples']} -> {args.output}")
     lost = skipped + nonfinite + n_excl + m["gap_samples"]
     if lost:
-        print(f"incomplete: {skipped} skipped line(s), {nonfinite + n_excl} excluded frame(s), "
-              f"{m['gap_samples']} gap sample(s)")
+        warn("import-can", f"incomplete: {skipped} skipped line(s), {nonfinite + n_excl} "
+                           f"excluded frame(s), {m['gap_samples']} gap sample(s)")
     return 1 if lost else 0

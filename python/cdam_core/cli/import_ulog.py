@@ -24,7 +24,7 @@ def run(args) -> int:
     from cdam_core.record.dataset import write_dataset
     from cdam_core.record.ulog import load_ulog
 
-    from cdam_core.cli.common import check_io
+    from cdam_core.cli.common import check_io, warn
     from cdam_core.record.dataset import sidecar_path
 
     out = Path(args.output)
@@ -36,13 +36,13 @@ def run(args) -> int:
           f"ver_hw {m['ver_hw']!r})")
     print(f"topics: {m['topics']}")
     if m["missing"]:
-        print(f"missing (record is partial): {'; '.join(m['missing'])}")
+        warn("import-ulog", f"missing (record is partial): {'; '.join(m['missing'])}")
     for col, gaps in m["gaps"].items():
         worst = max(g["duration"] for g in gaps)
-        print(f"gap: {col}: {len(gaps)} interval(s) > {args.gap_factor:g} x median, "
-              f"longest {worst:.3f} s")
+        warn("import-ulog", f"gap: {col}: {len(gaps)} interval(s) > {args.gap_factor:g} x "
+                            f"median, longest {worst:.3f} s")
     for d in m["dropouts"]:
-        print(f"logger dropout at {d['start']:.3f} s for {d['duration']:.3f} s")
+        warn("import-ulog", f"logger dropout at {d['start']:.3f} s for {d['duration']:.3f} s")
     print(f"{len(ds)} samples at {args.rate:g} Hz ({ds.t[0]:.3f}..{ds.t[-1]:.3f} s), "
           f"columns {', '.join(ds.columns)} -> {args.output}")
     return 0

@@ -6,6 +6,8 @@ import importlib
 import importlib.util
 import sys
 
+from cdam_core import __version__
+
 # Command modules in the order `cdam --help` lists them. A module that is not present yet
 # (a command still being built) is skipped; one that is present but fails to import is an error.
 COMMANDS = [
@@ -25,10 +27,11 @@ COMMANDS = [
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = CdamParser(
         prog="cdam",
         description="Identify, check and fly the dynamics of a cable-driven aerial manipulator.",
-        formatter_class=argparse.RawDescriptionHelpFormatter, epilog=EXIT_CODES)
+        epilog=EXIT_CODES)
+    parser.add_argument("--version", action="version", version=f"cdam {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMANDS:
         modname = f"cdam_core.cli.{name}"
@@ -38,7 +41,7 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-from cdam_core.cli.common import EXIT_CODES, CliError  # noqa: E402  (re-exported)
+from cdam_core.cli.common import EXIT_CODES, CdamParser, CliError  # noqa: E402  (re-exported)
 
 
 def _message(exc: BaseException) -> tuple[str, int]:

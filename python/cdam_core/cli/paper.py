@@ -1,7 +1,8 @@
 """`cdam paper`: the paper's study (Tables 2 and 3, Figs. 8-15) on simulated flights."""
 from __future__ import annotations
 
-from cdam_core.cli.common import CliError, check_io, parse_narx
+from cdam_core.cli.common import (CliError, check_io, note, parse_narx, show_progress,
+                                  write_json)
 
 
 def register(subparsers) -> None:
@@ -14,7 +15,11 @@ def register(subparsers) -> None:
     p.add_argument("--seeds", type=int, default=4,
                    help="identification seeds per algorithm (default 4: the fewest for which a "
                         "rank-sum test can reach p < 0.05)")
-    p.add_argument("--out", default="paper_out", help="output folder (default paper_out)")
+    p.add_argument("--out", "--report", dest="out", metavar="DIR", default="paper_out",
+                   help="output folder: the report, results.json, figures, records "
+                        "(default paper_out)")
+    p.add_argument("--json", metavar="FILE", default=None,
+                   help="also write results.json's content to FILE")
     p.add_argument("--rate", type=float, default=200.0,
                    help="training/evaluation rate in Hz after smoothing at 1 kHz (default 200; "
                         "1000 = no decimation)")
@@ -36,13 +41,12 @@ def register(subparsers) -> None:
     p.add_argument("--epochs", type=int, default=50, help="LM epochs at most (default 50)")
     p.add_argument("--effect", action="append", default=[], metavar="NAME[:param=value,...]",
                    help="extra simulator effect (repeatable; see cdam simulate --list-effects)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress and no notes on stderr (warnings stay)")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
-    import sys
-
     from cdam_core.paper import PaperConfig, run_paper
     from cdam_core.report.paper.tables import mode_label
 
@@ -55,7 +59,7 @@ def run(args) -> int:
         raise CliError("--iterations/--smoothing: must be >= 0")
     if not args.duration > 0:
         raise CliError(f"--duration: must be positive, got {args.duration}")
-    check_io(folders=[("--out", args.out)])
+    check_io(files=[("--json", args.json)], folders=[("--out", args.out)])
     try:
         cfg = PaperConfig(seeds=args.seeds, flight_seed=args.flight_seed, duration=args.duration,
                           rate=args.rate, smoothing=args.smoothing, hidden=args.hidden,
@@ -65,7 +69,9 @@ def run(args) -> int:
                           horizons=tuple(args.horizon) if args.horizon else (0.1,))
     except ValueError as exc:
         raise CliError(str(exc)) from None
-    result = run_paper(cfg, args.out, progress=not args.quiet)
+    result = run_paper(cfg, args.out, progress=show_progress(args))
+    if args.json:
+        write_json(args.json, result)
     algo = cfg.algos[0]
     for rec, label in (("test", "Table 2"), ("validation", "Table 3")):
         print(f"{label}, {algo} mean r (yes: every algorithm reaches its published r)")
@@ -79,5 +85,5 @@ def run(args) -> int:
                                  f"{'yes' if flags[f'{sec}/{rec}/{mode}'] else 'no'}")
             paper = result["published"]["table2" if rec == "test" else "table3"][o][algo]
             print(f"  {o:6s} paper {paper:.4f} | " + " | ".join(cells))
-    print(f"index: {args.out}/index.md ({result['seconds']['total']:.1f} s)", file=sys.stderr)
+    note(args, f"index: {args.out}/index.md ({result['seconds']['total']:.1f} s)")
     return 0

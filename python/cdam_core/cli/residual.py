@@ -7,7 +7,7 @@ import math
 from pathlib import Path
 
 from cdam_core.base.jsonio import write_text_atomic
-from cdam_core.cli.common import CliError, check_io
+from cdam_core.cli.common import CliError, add_outputs, check_io, note
 
 
 def _split(s):
@@ -74,6 +74,9 @@ def run(args) -> int:
     from cdam_core.models.greybox.effects import LIBRARY
     meta = getattr(ds, "meta", None) or {}
     declared = [e for e in ((meta.get("model") or {}).get("effects") or []) if e in LIBRARY]
+    if sys.stderr.isatty():
+        note(args, f"fitting {args.model} and testing {len(LIBRARY)} library effects on "
+                   f"{len(ds)} samples (about a minute for long records)")
     sel = analyse(args.model, ds.t, signals, extra=extra or None, cutoff_hz=args.cutoff,
                   alpha=args.alpha, free_run=not args.no_free_run, fixed=fixed or None,
                   declared=declared)
@@ -192,4 +195,5 @@ def register(subparsers) -> None:
                                    "payload_mass needs)")
     p.add_argument("--alpha", type=float, default=0.01, help="significance level (default 0.01)")
     p.add_argument("--no-free-run", action="store_true", help="skip the free-run simulation")
+    add_outputs(p, json=False, report=False)
     p.set_defaults(func=run)

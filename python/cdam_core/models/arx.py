@@ -66,14 +66,23 @@ class ArxModel(Model):
     kind = "arx"
 
     def __init__(self, narx=(3, 3, 0), features: str = "raw"):
-        self.orders = parse_orders(narx)
-        if features not in FEATURES:
-            raise ValueError(f"features: unknown {features!r}; use 'raw' or 'physics'")
+        self.narx = narx                   # as given (scikit-learn's clone relies on it)
         self.features = features
+        self._check_params()
+
+    def _check_params(self) -> None:
+        parse_orders(self.narx)
+        if self.features not in FEATURES:
+            raise ValueError(f"features: unknown {self.features!r}; use 'raw' or 'physics'")
 
     @property
-    def narx(self) -> tuple:
-        return tuple(self.orders)
+    def orders(self) -> Orders:
+        """The checked orders of ``narx`` (parsed again when ``narx`` changes)."""
+        cached = getattr(self, "_orders_cache", None)
+        if cached is None or cached[0] is not self.narx:
+            cached = (self.narx, parse_orders(self.narx))
+            self._orders_cache = cached
+        return cached[1]
 
     @property
     def t0(self) -> int:
@@ -89,10 +98,12 @@ class ArxModel(Model):
 
     def _check_length(self, n):
         if n < 4 * (self.t0 + 1) + 10:
-            raise ValueError(f"U: {n} samples are too few for orders {self.narx}")
+            raise ValueError(f"U: {n} samples are too few for orders {tuple(self.orders)}")
 
     def _fit(self, U, Y):
+        self._check_params()
         self._check_length(U.shape[0])
+        self.y_start_ = Y.mean(axis=0)     # where predict(U) alone starts a free run
         self.n_inputs_, self.n_outputs_ = U.shape[1], Y.shape[1]
         self.feature_scale_ = physics_features(U)[1] if self.features == "physics" else None
         R = arx_design(self._features(U), Y, self.orders)
@@ -146,7 +157,7 @@ class ArxModel(Model):
 
     def to_dict(self) -> dict:
         self._check_fitted()
-        return {"narx": list(self.narx), "features": self.features,
+        return {"narx": list(self.orders), "features": self.features,
                 "n_inputs": int(self.n_inputs_), "n_outputs": int(self.n_outputs_),
                 "feature_scale": None if self.feature_scale_ is None else
                 [float(v) for v in self.feature_scale_],

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from cdam_core.base.checks import finite_float, positive_int
 from cdam_core.base.metrics import mean_pearson
 from cdam_core.models.arx import ArxModel, lagged
 from cdam_core.models.network import BPNetwork
@@ -49,12 +50,19 @@ class HybridNarx(ArxModel):
 
     def __init__(self, narx=(3, 3, 0), features="raw", fit_residual=None, seed=0,
                  validation_fraction=0.2):
-        super().__init__(narx, features)
-        if not 0.0 < float(validation_fraction) < 1.0:
-            raise ValueError("validation_fraction: must be in (0, 1)")
-        self.seed = int(seed)
+        self.seed = seed                   # all stored as given (scikit-learn's clone)
         self.fit_residual = fit_residual
-        self.validation_fraction = float(validation_fraction)
+        self.validation_fraction = validation_fraction
+        super().__init__(narx, features)
+
+    def _check_params(self) -> None:
+        super()._check_params()
+        positive_int(self.seed, "seed", minimum=0)
+        f = finite_float(self.validation_fraction, "validation_fraction")
+        if not 0.0 < f < 1.0:
+            raise ValueError("validation_fraction: must be in (0, 1)")
+        if self.fit_residual is not None and not callable(self.fit_residual):
+            raise ValueError("fit_residual: must be callable (X, R) -> fitted BPNetwork")
 
     def _fit(self, U, Y):
         super()._fit(U, Y)
@@ -63,8 +71,8 @@ class HybridNarx(ArxModel):
         F = self._features(U)
         resid = Y[t0:] - ArxModel._one_step(self, U, Y)
         Xn = lagged(F, nb, nk, t0)
-        n_fit = int(round(len(Xn) * (1 - self.validation_fraction)))
-        fitter = self.fit_residual or _default_residual_fitter(self.seed)
+        n_fit = int(round(len(Xn) * (1 - float(self.validation_fraction))))
+        fitter = self.fit_residual or _default_residual_fitter(int(self.seed))
         net = fitter(Xn[:n_fit], resid[:n_fit])
         if not isinstance(net, BPNetwork) or net.narx is not None:
             raise ValueError("fit_residual: must return a fitted static BPNetwork")

@@ -51,35 +51,55 @@ class BPNetwork(Model):
     def __init__(self, hidden=20, activation="tansig", trainer="lm", *, epochs=1000, goal=0.0,
                  mu=1e-3, mu_dec=0.1, mu_inc=10.0, mu_max=1e10, min_grad=1e-7, max_fail=6,
                  lr=0.01, validation_fraction=0.0, narx=None, seed=0, threads=2):
-        if activation not in ("tansig", "logsig"):
-            raise ValueError(f"activation: unknown {activation!r}; use 'tansig' or 'logsig'")
-        if trainer not in ("lm", "gd"):
-            raise ValueError(f"trainer: unknown {trainer!r}; use 'lm' or 'gd'")
-        if hidden != "auto":
-            hidden = positive_int(hidden, "hidden")
+        # stored as given (scikit-learn's clone and set_params rely on it), checked here and
+        # normalised where used (_settings)
         self.hidden = hidden
         self.activation = activation
         self.trainer = trainer
-        self.epochs = positive_int(epochs, "epochs", minimum=0)
-        self.goal = finite_float(goal, "goal", minimum=0.0)
-        self.mu = finite_float(mu, "mu", minimum=0.0, strict=True)
-        self.mu_dec = finite_float(mu_dec, "mu_dec", minimum=0.0, strict=True)
-        self.mu_inc = finite_float(mu_inc, "mu_inc", minimum=1.0, strict=True)
-        self.mu_max = finite_float(mu_max, "mu_max", minimum=0.0, strict=True)
-        self.min_grad = finite_float(min_grad, "min_grad", minimum=0.0)
-        self.max_fail = positive_int(max_fail, "max_fail")
-        self.lr = finite_float(lr, "lr", minimum=0.0, strict=True)
-        self.validation_fraction = finite_float(validation_fraction, "validation_fraction", minimum=0.0)
-        if self.validation_fraction >= 1.0:
+        self.epochs, self.goal, self.mu, self.mu_dec = epochs, goal, mu, mu_dec
+        self.mu_inc, self.mu_max, self.min_grad, self.max_fail = mu_inc, mu_max, min_grad, max_fail
+        self.lr, self.validation_fraction = lr, validation_fraction
+        self.narx = narx
+        self.seed, self.threads = seed, threads
+        self._settings()
+
+    def _settings(self) -> dict:
+        """The parameters checked and as plain Python numbers (ValueError naming a bad one)."""
+        if self.activation not in ("tansig", "logsig"):
+            raise ValueError(f"activation: unknown {self.activation!r}; use 'tansig' or 'logsig'")
+        if self.trainer not in ("lm", "gd"):
+            raise ValueError(f"trainer: unknown {self.trainer!r}; use 'lm' or 'gd'")
+        s = {"hidden": "auto" if isinstance(self.hidden, str) and self.hidden == "auto"
+             else positive_int(self.hidden, "hidden"),
+             "epochs": positive_int(self.epochs, "epochs", minimum=0),
+             "goal": finite_float(self.goal, "goal", minimum=0.0),
+             "mu": finite_float(self.mu, "mu", minimum=0.0, strict=True),
+             "mu_dec": finite_float(self.mu_dec, "mu_dec", minimum=0.0, strict=True),
+             "mu_inc": finite_float(self.mu_inc, "mu_inc", minimum=1.0, strict=True),
+             "mu_max": finite_float(self.mu_max, "mu_max", minimum=0.0, strict=True),
+             "min_grad": finite_float(self.min_grad, "min_grad", minimum=0.0),
+             "max_fail": positive_int(self.max_fail, "max_fail"),
+             "lr": finite_float(self.lr, "lr", minimum=0.0, strict=True),
+             "validation_fraction": finite_float(self.validation_fraction,
+                                                 "validation_fraction", minimum=0.0),
+             "narx": tuple(parse_orders(self.narx)) if self.narx is not None else None,
+             "seed": positive_int(self.seed, "seed", minimum=0),
+             "threads": positive_int(self.threads, "threads")}
+        if s["validation_fraction"] >= 1.0:
             raise ValueError("validation_fraction: must be < 1")
-        self.narx = tuple(parse_orders(narx)) if narx is not None else None
-        self.seed = positive_int(seed, "seed", minimum=0)
-        self.threads = positive_int(threads, "threads")
+        return s
 
     # ---- helpers ----
     @property
     def t0(self) -> int:
         return 0 if self.narx is None else parse_orders(self.narx).t0
+
+    def _orders(self) -> tuple:
+        return tuple(parse_orders(self.narx))
+
+    def _start_outputs(self) -> np.ndarray:
+        """The middle of the training output range (0 in the network's scaled units)."""
+        return 0.5 * (self.scaler_y_.data_min_ + self.scaler_y_.data_max_)
 
     @property
     def dynamic(self) -> bool:
@@ -89,14 +109,14 @@ class BPNetwork(Model):
         """Network inputs and targets from scaled signals (NARX regressors when narx is set)."""
         if self.narx is None:
             return Us, Ys
-        na, nb, nk = self.narx
+        na, nb, nk = self._orders()
         if Us.shape[0] <= self.t0:
             raise ValueError(f"U: {Us.shape[0]} samples, NARX needs more than t0 = {self.t0}")
         return _core.narx_regressors(Us, Ys, na, nb, nk), Ys[self.t0:]
 
     def _initial_theta(self, n_in, h, n_out, dtype):
         D = n_in * h + h + h * n_out + n_out
-        return np.asarray(_core.Rng(self.seed).uniform_array(D, -1.0, 1.0), dtype=dtype)
+        return np.asarray(_core.Rng(int(self.seed)).uniform_array(D, -1.0, 1.0), dtype=dtype)
 
     # ---- estimator API ----
     def fit(self, U, Y, theta0=None, validation=None, callback=None) -> "BPNetwork":
@@ -105,7 +125,12 @@ class BPNetwork(Model):
         ``validation=(U_val, Y_val)`` early-stops LM (max_fail) and returns the best-validation
         weights; ``callback(epoch, mse)`` is called each epoch (return False to stop).
         """
+        cfg = self._settings()                    # set_params or attribute edits since __init__
         U = as_2d(U, "U")
+        if Y is None:
+            raise ValueError("Y: the measured outputs are required (requires y to be passed, "
+                             "but the target y is None)")
+        Y1 = Y
         Y = as_2d(Y, "Y", dtype=U.dtype)
         same_rows(U, Y, "U, Y")
         val = None
@@ -118,8 +143,8 @@ class BPNetwork(Model):
             if Uv.shape[1] != U.shape[1] or Yv.shape[1] != Y.shape[1]:
                 raise ValueError("validation: channel counts differ from U, Y")
             val = (Uv, Yv)
-        elif self.validation_fraction > 0:
-            n_val = int(round(U.shape[0] * self.validation_fraction))
+        elif cfg["validation_fraction"] > 0:
+            n_val = int(round(U.shape[0] * cfg["validation_fraction"]))
             if n_val < 1 or U.shape[0] - n_val < 1:
                 raise ValueError("validation_fraction: leaves no training or no validation samples")
             val = (U[-n_val:], Y[-n_val:])
@@ -131,8 +156,8 @@ class BPNetwork(Model):
         Xv = Tv = None
         if val is not None:
             Xv, Tv = self._design(self.scaler_x_.transform(val[0]), self.scaler_y_.transform(val[1]))
-        candidates = (hidden_node_candidates(X.shape[1], T.shape[1]) if self.hidden == "auto"
-                      else [self.hidden])
+        candidates = (hidden_node_candidates(X.shape[1], T.shape[1]) if cfg["hidden"] == "auto"
+                      else [cfg["hidden"]])
         best = None
         for h in candidates:
             if theta0 is not None and len(candidates) == 1:
@@ -142,23 +167,24 @@ class BPNetwork(Model):
                     raise ValueError(f"theta0: expected length {D}, got {th0.shape[0]}")
             else:
                 th0 = self._initial_theta(X.shape[1], h, T.shape[1], U.dtype)
-            theta, hist = self._train(th0, X, T, h, Xv, Tv, callback)
+            theta, hist = self._train(cfg, th0, X, T, h, Xv, Tv, callback)
             final = hist["mse"][-1]
             if best is None or final < best[0]:
                 best = (final, h, theta, hist)
         _, self.hidden_, self.theta_, self.history_ = best
+        self._note_target(Y1)
         return self
 
-    def _train(self, theta0, X, T, h, Xv, Tv, callback):
+    def _train(self, cfg, theta0, X, T, h, Xv, Tv, callback):
         k = _core
-        extra = {"threads": self.threads, "callback": callback}
+        extra = {"threads": cfg["threads"], "callback": callback}
         if self.trainer == "gd":
-            return k.train_gd(theta0, X, T, h, self.activation, lr=self.lr, epochs=self.epochs,
-                              goal=self.goal, **extra)
-        return k.train_lm(theta0, X, T, h, self.activation, epochs=self.epochs, goal=self.goal,
-                          mu=self.mu, mu_dec=self.mu_dec, mu_inc=self.mu_inc, mu_max=self.mu_max,
-                          min_grad=self.min_grad, max_fail=self.max_fail, X_val=Xv, T_val=Tv,
-                          **extra)
+            return k.train_gd(theta0, X, T, h, self.activation, lr=cfg["lr"],
+                              epochs=cfg["epochs"], goal=cfg["goal"], **extra)
+        return k.train_lm(theta0, X, T, h, self.activation, epochs=cfg["epochs"], goal=cfg["goal"],
+                          mu=cfg["mu"], mu_dec=cfg["mu_dec"], mu_inc=cfg["mu_inc"],
+                          mu_max=cfg["mu_max"], min_grad=cfg["min_grad"],
+                          max_fail=cfg["max_fail"], X_val=Xv, T_val=Tv, **extra)
 
     def _fit(self, U, Y):
         self.fit(U, Y)
@@ -176,7 +202,8 @@ class BPNetwork(Model):
     def _one_step(self, U, Y):
         dt = self.theta_.dtype
         X = _core.narx_regressors(self.scaler_x_.transform(U.astype(dt, copy=False)),
-                                  self.scaler_y_.transform(Y.astype(dt, copy=False)), *self.narx)
+                                  self.scaler_y_.transform(Y.astype(dt, copy=False)),
+                                  *self._orders())
         Ys = _core.mlp_forward(self.theta_, X, self.hidden_, self.n_outputs_, self.activation)
         return self.scaler_y_.inverse_transform(Ys)
 
@@ -185,14 +212,14 @@ class BPNetwork(Model):
         Ys0 = (self.scaler_y_.transform(Y0.astype(dt, copy=False)) if t0
                else np.zeros((0, self.n_outputs_), dt))
         Ys = _core.narx_simulate(self.theta_, self.scaler_x_.transform(U.astype(dt, copy=False)),
-                                 Ys0, self.hidden_, self.activation, *self.narx)
+                                 Ys0, self.hidden_, self.activation, *self._orders())
         return self.scaler_y_.inverse_transform(Ys)[t0:]
 
     # ---- model file section ----
     def to_dict(self) -> dict:
         self._check_fitted()
         return {"hidden": int(self.hidden_), "activation": self.activation,
-                "narx": list(self.narx) if self.narx is not None else None,
+                "narx": list(self._orders()) if self.narx is not None else None,
                 "n_inputs": int(self.n_inputs_), "n_outputs": int(self.n_outputs_),
                 "theta": [float(v) for v in np.asarray(self.theta_, dtype=np.float64)],
                 "x_min": [float(v) for v in self.scaler_x_.data_min_],

@@ -8,6 +8,13 @@ with ``predict(U, Y, mode, k, segments)``:
   between (k = 1 is one-step; k >= the record length is free run);
 - ``mode="free_run"``: from the first ``t0`` measured rows only.
 
+``predict(U)`` alone (scikit-learn's call): a static model maps U; a dynamic one runs free from
+its start outputs (``_start_outputs``: the middle of the training output range for a network,
+the training mean for ARX kinds), since no measured output is given. A model fitted on a 1-D Y
+predicts 1-D arrays (scikit-learn's convention); ``score`` is R^2 of the one-step prediction.
+The scikit-learn protocol (``get_params``, ``set_params``, tags) comes from
+:class:`cdam_core.base.estimator.EstimatorParams`, without scikit-learn as a dependency.
+
 ``segments`` splits the rows into records laid end to end (a list of lengths, or of (start,
 stop) row ranges that tile 0..N): no prediction crosses a seam; each segment starts again from
 its own first ``t0`` measured rows, which are returned as measured (as are the first t0 + k - 1
@@ -27,6 +34,7 @@ from typing import ClassVar
 import numpy as np
 
 from cdam_core.base.checks import as_2d, positive_int
+from cdam_core.base.estimator import EstimatorParams
 
 __all__ = ["Model", "MODES", "segment_bounds", "Parameter"]
 
@@ -70,7 +78,7 @@ def segment_bounds(segments, n: int) -> list[tuple[int, int]]:
     return bounds
 
 
-class Model(ABC):
+class Model(EstimatorParams, ABC):
     """Base of every model kind (see the module doc)."""
 
     kind: ClassVar[str] = ""
@@ -92,6 +100,21 @@ class Model(ABC):
     def is_fitted(self) -> bool:
         return getattr(self, "n_outputs_", None) is not None
 
+    def _n_features(self) -> int:
+        return self.n_inputs_
+
+    def _note_target(self, Y) -> None:
+        """Remember whether Y was 1-D, so that predictions come back in its shape."""
+        self._target_1d = np.asarray(Y).ndim == 1
+
+    def _start_outputs(self) -> np.ndarray:
+        """Outputs a free run starts from when no measured output is given."""
+        start = getattr(self, "y_start_", None)
+        if start is None:
+            raise ValueError("Y: a dynamic model needs the measured outputs (at least the first "
+                             "t0 rows of each segment)")
+        return start
+
     def _check_fitted(self):
         if not self.is_fitted():
             raise ValueError(f"{type(self).__name__}: not fitted; call fit(U, Y) first")
@@ -100,15 +123,28 @@ class Model(ABC):
     def fit(self, U, Y):
         """Fit on inputs U (N, i) and outputs Y (N, m); returns self."""
         U = as_2d(U, "U")
+        if Y is None:
+            raise ValueError("Y: the measured outputs are required (requires y to be passed, "
+                             "but the target y is None)")
+        Y1 = Y
         Y = as_2d(Y, "Y")
         if U.shape[0] != Y.shape[0]:
             raise ValueError(f"U, Y: mismatched sample counts ({U.shape[0]} and {Y.shape[0]})")
         self._fit(U, Y)
+        self._note_target(Y1)
         return self
 
-    def predict(self, U, Y=None, mode: str = "one_step", k: int = 1, segments=None) -> np.ndarray:
-        """Outputs (N, m) in physical units; see the module doc for ``mode``, ``k``, ``segments``."""
+    def predict(self, U, Y=None, mode: str | None = None, k: int = 1,
+                segments=None) -> np.ndarray:
+        """Outputs (N, m) in physical units; see the module doc for ``mode``, ``k``, ``segments``
+        (default: one step when Y is given, else free run from ``_start_outputs``)."""
+        P = self._predict(U, Y, mode, k, segments)
+        return P[:, 0] if getattr(self, "_target_1d", False) and P.shape[1] == 1 else P
+
+    def _predict(self, U, Y, mode, k, segments) -> np.ndarray:
         self._check_fitted()
+        if mode is None:
+            mode = "one_step" if Y is not None else "free_run"
         if mode not in MODES:
             raise ValueError(f"mode: unknown {mode!r}; use one of {', '.join(MODES)}")
         U = as_2d(U, "U")
@@ -117,8 +153,9 @@ class Model(ABC):
         if not self.dynamic:
             return self._static(U)
         if Y is None:
-            raise ValueError("Y: a dynamic model needs the measured outputs (at least the first "
-                             "t0 rows of each segment)")
+            if mode != "free_run":
+                raise ValueError(f"Y: mode {mode!r} needs the measured outputs")
+            Y = np.tile(self._start_outputs(), (U.shape[0], 1))
         Y = as_2d(Y, "Y")
         if Y.shape[1] != self.n_outputs_:
             raise ValueError(f"Y: expected {self.n_outputs_} columns, got {Y.shape[1]}")
@@ -143,7 +180,7 @@ class Model(ABC):
         """Coefficient of determination R^2 averaged over outputs (as scikit-learn), skipping
         the measured rows of each segment."""
         Y = as_2d(Y, "Y")
-        P = self.predict(U, Y, mode=mode, k=k, segments=segments)
+        P = self._predict(U, Y, mode, k, segments)
         skip = self.t0 + (k - 1 if mode == "k_step" else 0)
         keep = np.zeros(len(Y), bool)
         for a, b in segment_bounds(segments, len(Y)):

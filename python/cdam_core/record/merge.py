@@ -13,13 +13,23 @@ parabola through the three samples around it. Uncertainty (1 sigma): the overlap
 ``n_segments`` pieces, the sub-sample peak is found in each near the global lag, and the
 standard error of those estimates (std / sqrt(n)) is combined with the grid's quantisation
 (1 / (rate sqrt(12))). Clock drift shows as a trend across segments (``meta["segments"]``).
+
+Significance (``p_value``): is the peak more than two unrelated smooth signals give by chance?
+Under the null (independent signals) the correlation r over n overlapping samples of two
+autocorrelated series has variance 1/n_eff, with the effective number of samples of Bartlett
+(1935) in the form of Pyper and Peterman (1998): 1/n_eff = 1/n + (2/n) sum_{j=1..n/5}
+(n-j)/n rho_a(j) rho_b(j), rho the sample autocorrelations. The single-lag p-value is Student's
+t with n_eff - 2 degrees of freedom, and the peak is the best of the lags searched: about
+lags * n_eff / n of them are independent (one per decorrelation length n / n_eff), so the
+reported p-value is Sidak's 1 - (1 - p1)^m over those m. ``merge_records`` refuses an alignment
+with p_value > alpha (0.01 by default): the pair does not see one motion, or too little of it.
 """
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from scipy import signal
+from scipy import signal, stats
 
 from cdam_core.record.dataset import Dataset
 from cdam_core.record.resample import check_time, resample, segmented_grid, uniform_grid
@@ -28,7 +38,16 @@ from cdam_core.record.resample import check_time, resample, segmented_grid, unif
 # period is a gap (a logger dropout, not jitter): no merged sample falls inside it.
 GAP_PERIODS = 5.0
 
-__all__ = ["OffsetEstimate", "estimate_offset", "merge_records"]
+__all__ = ["OffsetEstimate", "WeakAlignment", "estimate_offset", "merge_records",
+           "ALIGNMENT_ALPHA"]
+
+# significance level under which an alignment is accepted (the chance that unrelated signals
+# peak as high is below 1 %); merge_records(force=True) accepts any (cdam merge --force)
+ALIGNMENT_ALPHA = 0.01
+
+
+class WeakAlignment(ValueError):
+    """The peak correlation is not significant: the pair does not show one motion."""
 
 
 @dataclass
@@ -40,6 +59,9 @@ class OffsetEstimate:
     correlation: float       # biased correlation at the peak (-1..1; sign = sign of the pair)
     rate: float              # grid rate used (Hz)
     segments: list           # per-segment offset estimates (s)
+    p_value: float = float("nan")   # chance of so high a peak from unrelated signals (Sidak)
+    n_eff: float = float("nan")     # effective independent samples in the overlap at the peak
+    lags_searched: int = 0
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -74,6 +96,32 @@ def _peak(a: np.ndarray, b: np.ndarray, lag_lo: int, lag_hi: int):
         if den < 0:
             frac = 0.5 * (y0 - y2) / den
     return lags[i] + frac, float(cn[i])
+
+
+def _autocorr(x: np.ndarray, m: int) -> np.ndarray:
+    """Sample autocorrelation of a zero-mean x at lags 1..m (biased, FFT)."""
+    c = signal.correlate(x, x, mode="full", method="fft")[x.size - 1:x.size + m]
+    return c[1:] / c[0]
+
+
+def _significance(a: np.ndarray, b: np.ndarray, k: float, corr: float,
+                  n_lags: int) -> tuple[float, float]:
+    """(p_value, n_eff) of the peak ``corr`` at lag ``k`` among ``n_lags`` lags searched (see
+    the module's docstring)."""
+    n = int(min(a.size, int(np.floor(k)) + b.size) - max(0, int(np.ceil(k))))
+    n = max(n, 3)
+    r = min(abs(corr) * min(a.size, b.size) / n, 1.0)     # the correlation over the overlap
+    m = max(1, n // 5)
+    j = np.arange(1, m + 1)
+    s = float(np.sum((n - j) / n * _autocorr(a, m)[:m] * _autocorr(b, m)[:m]))
+    n_eff = float(np.clip(n / (1.0 + 2.0 * s), 3.0, n))
+    df = n_eff - 2.0
+    if r >= 1.0:
+        return 0.0, n_eff
+    t = r * np.sqrt(df / (1.0 - r * r))
+    p1 = float(2.0 * stats.t.sf(t, df))
+    indep = max(1.0, n_lags * n_eff / n)
+    return float(-np.expm1(indep * np.log1p(-min(p1, 1.0 - 1e-16)))), n_eff
 
 
 def estimate_offset(t_a, x_a, t_b, x_b, rate: float | None = None,
@@ -115,6 +163,8 @@ def estimate_offset(t_a, x_a, t_b, x_b, rate: float | None = None,
             raise ValueError(f"max_lag: expected a positive duration, got {max_lag!r}")
         lo, hi = -int(np.ceil(max_lag * rate)), int(np.ceil(max_lag * rate))
     k, corr = _peak(a, b, lo, hi)
+    n_lags = min(hi, ga.size - 1) - max(lo, -(gb.size - 1)) + 1
+    p_value, n_eff = _significance(a, b, k, corr, n_lags)
     base = ga[0] - gb[0]
     offset = base + k / rate
     # segments of b that overlap a at the global lag
@@ -134,7 +184,8 @@ def estimate_offset(t_a, x_a, t_b, x_b, rate: float | None = None,
     segs = np.asarray(segs)
     se = float(np.std(segs, ddof=1) / np.sqrt(segs.size))
     unc = float(np.hypot(se, 1.0 / (rate * np.sqrt(12.0))))
-    return OffsetEstimate(float(offset), unc, corr, float(rate), segs.tolist())
+    return OffsetEstimate(float(offset), unc, corr, float(rate), segs.tolist(), p_value, n_eff,
+                          int(n_lags))
 
 
 def _gaps(t: np.ndarray, which: str) -> list[dict]:
@@ -162,7 +213,8 @@ def _without(start: float, stop: float, gaps: list) -> list[tuple[float, float]]
 
 
 def merge_records(flight: Dataset, joints: Dataset, pair: tuple[str, str] | None = None,
-                  rate: float | None = None, max_lag: float | None = None
+                  rate: float | None = None, max_lag: float | None = None,
+                  alpha: float = ALIGNMENT_ALPHA, force: bool = False
                   ) -> tuple[Dataset, OffsetEstimate]:
     """Align ``joints`` to ``flight``'s clock and resample both onto one grid.
 
@@ -171,6 +223,9 @@ def merge_records(flight: Dataset, joints: Dataset, pair: tuple[str, str] | None
             the two records share.
         rate: output rate (Hz); default the flight's rate.
         max_lag: search range for the offset (s), see estimate_offset.
+        alpha: refuse (WeakAlignment) an offset whose peak correlation has a p-value above
+            this (see the module's docstring).
+        force: accept it anyway, marked ``meta["clock_offset"]["significant"] = False``.
 
     Columns of ``joints`` whose names are already in ``flight`` get the suffix ``_joints``.
     Each column is resampled as its record's ``meta["interpolation"]`` says (default linear).
@@ -189,7 +244,16 @@ def merge_records(flight: Dataset, joints: Dataset, pair: tuple[str, str] | None
         pair = (common[0], common[0])
     fa, jb = pair
     xa, xb = flight.column(fa), joints.column(jb)   # ValueError names an unknown column
+    if not 0 < alpha < 1:
+        raise ValueError(f"alpha: expected a significance level in (0, 1), got {alpha!r}")
     est = estimate_offset(flight.t, xa, joints.t, xb, max_lag=max_lag)
+    significant = est.p_value <= alpha
+    if not (significant or force):
+        raise WeakAlignment(
+            f"pair {fa}:{jb}: peak correlation {est.correlation:+.3f} at offset "
+            f"{est.offset:.6f} s is not significant (p = {est.p_value:.2g} > {alpha:g}; "
+            f"{est.n_eff:.0f} effective samples, {est.lags_searched} lags searched): the pair "
+            "does not show one motion; name another --pair, or --force to merge anyway")
     rate = float(rate or flight.rate)
     tj = joints.t + est.offset
     start, stop = max(flight.t[0], tj[0]), min(flight.t[-1], tj[-1])
@@ -216,7 +280,7 @@ def merge_records(flight: Dataset, joints: Dataset, pair: tuple[str, str] | None
     meta = {
         "source": {"flight": flight.meta.get("source"), "joints": joints.meta.get("source")},
         "rate": rate,
-        "clock_offset": {**est.as_dict(), "pair": [fa, jb],
+        "clock_offset": {**est.as_dict(), "pair": [fa, jb], "significant": bool(significant),
                          "meaning": "joints time + offset = flight time"},
         "units": units,
         "interpolation": interp,

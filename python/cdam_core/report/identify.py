@@ -16,7 +16,7 @@ from cdam_core.base.metrics import adaptation_value
 from cdam_core.base.jsonio import atomic_target, write_text_atomic
 from cdam_core.preprocess import smooth_pair
 
-__all__ = ["write_report"]
+__all__ = ["write_report", "headline"]
 
 _LABEL = {"iboa": "IBOA-BP", "boa": "BOA-BP", "cabc": "CABC-BP", "bp": "BP"}
 
@@ -25,6 +25,55 @@ def _fmt(a, digits=4):
     if a["mean"] is None:
         return "n/a"
     return f"{a['mean']:.{digits}f} ± {a['std']:.{digits}f}"
+
+
+def _mean_over_outputs(per_output: dict, key: str):
+    vals = []
+    for m in per_output.values():
+        v = m[key]["mean"] if isinstance(m[key], dict) else m[key]
+        if v is None or not np.isfinite(v):
+            return None
+        vals.append(v)
+    return float(np.mean(vals)) if vals else None
+
+
+def _cell(r, nrmse) -> str:
+    return (f"r {'  n/a' if r is None else format(r, '5.3f')}  "
+            f"NRMSE {'n/a' if nrmse is None else format(nrmse, '.3f')}")
+
+
+def headline(result: dict) -> list[str]:
+    """The lines ``cdam identify`` leads with: on the validation record (else the test record),
+    each algorithm's mean r and NRMSE over outputs in free run (one step for a static map)
+    beside the naive and least-squares ARX baselines (``result["baselines"]``, see
+    ``evaluate.baselines.naive_and_arx``), then one step, then the training fitness."""
+    summary, base = result["summary"], result.get("baselines") or {}
+    first = next(iter(summary.values()))["records"]
+    rec = "validation" if "validation" in first else "test"
+    modes = ["free_run", "one_step"] if "free_run" in first[rec] else ["one_step"]
+    seeds = len(result["seeds"])
+    arx_label = "ARX({}, {}, {})".format(*base["arx_orders"]) if base else "ARX"
+    lines = []
+    for mode in modes:
+        what = "free run" if mode == "free_run" else "one step"
+        lines.append(f"{rec} record, {what}, mean over {len(result['outputs'])} output(s)"
+                     + (f" and {seeds} seeds" if seeds > 1 else "") + ":")
+        rows = [(_LABEL[algo], s["records"][rec][mode], "") for algo, s in summary.items()]
+        if rec in base:
+            rows.append(("naive", base[rec]["naive"][mode],
+                         "y(t-1)" if mode == "one_step" else "training mean"))
+            ax = base[rec]["arx"]
+            rows.append((arx_label, None if "error" in ax else ax.get(mode, ax["one_step"]),
+                         ax.get("error", "least squares")))
+        for label, m, why in rows:
+            cell = "n/a" if m is None else _cell(_mean_over_outputs(m, "r"),
+                                                  _mean_over_outputs(m, "nrmse"))
+            lines.append(f"  {label:<14} {cell}" + (f"   ({why})" if why else ""))
+    lines.append("training fitness 1/(1+MSE), normalised units (not a validation score): "
+                 + ", ".join(f"{_LABEL[a]} {_fmt(s['fitness'])}" for a, s in summary.items()))
+    lines.append("time per run: " + ", ".join(f"{_LABEL[a]} {_fmt(s['seconds'], 2)} s"
+                                               for a, s in summary.items()))
+    return lines
 
 
 def _convergence_figure(result, path):
@@ -115,6 +164,7 @@ def write_report(comparison, directory, *, records: dict | None = None,
              "", "Fitness = adaptation value 1 / (1 + MSE), MSE the final training error in "
              "normalised units. Metrics compare back-normalised predictions with the "
              "preprocessed (smoothed) measurements; NRMSE = RMSE / std(measured).", "",
+             "## Headline", "", "```", *headline(result), "```", "",
              "## Fitness and run time (mean ± std over seeds)", "",
              "| algorithm | fitness after LM | fitness of the optimiser's best | run time (s) | "
              "optimiser time (s) |", "|---|---|---|---|---|"]

@@ -1,8 +1,8 @@
-"""The Parrot AR.Drone 2.0 flight with OptiTrack (../shared/data/ardrone2) as a Dataset.
+"""The Parrot AR.Drone 2.0 flight with OptiTrack (data/ardrone2) as a Dataset.
 
-Source: tud-cor/ardrone2_dem_filter (Apache-2.0), matlab/expData10_29_25.mat; see the shared
-data README. We use ``origData`` (the raw, irregular streams), not the 20 s pre-resampled
-``output``/``input``:
+Source: tud-cor/ardrone2_dem_filter (Apache-2.0), matlab/expData10_29_25.mat; see
+data/ardrone2/PROVENANCE.md. We use ``origData`` (the raw, irregular streams), not the 20 s
+pre-resampled ``output``/``input``:
 - inputs ``motor1..motor4``: ``navMotor`` (PWM 0..255, about 198 Hz, irregular), zero-order hold;
 - outputs ``phi, theta, psi`` (``otOrient``, Z-Y-X Euler from OptiTrack, rad; unwrapped then
   linear) and ``X, Y, Z`` (``otPos``, m, linear), OptiTrack at a nominal 120 Hz.
@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from cdam_core.record.dataset import Dataset
-from cdam_core.record.realdata import shared_data_dir
+from cdam_core.record.realdata import real_record
 from cdam_core.record.resample import find_gaps, resample_signals
 
 __all__ = ["load_ardrone2", "ARDRONE2_FILE"]
@@ -34,7 +34,7 @@ def load_ardrone2(path: str | Path | None = None, rate: float = 120.0) -> Datase
     """Load the AR.Drone 2.0 flight resampled onto a uniform grid at ``rate`` Hz.
 
     Args:
-        path: the .mat file; default ``shared_data_dir() / ARDRONE2_FILE``.
+        path: the .mat file; default ``real_record(ARDRONE2_FILE)`` (data/ first).
         rate: grid rate in Hz (default 120, OptiTrack's nominal rate).
 
     Returns:
@@ -43,9 +43,9 @@ def load_ardrone2(path: str | Path | None = None, rate: float = 120.0) -> Datase
     """
     from scipy.io import loadmat
 
-    path = Path(path) if path is not None else shared_data_dir() / ARDRONE2_FILE
+    path = Path(path) if path is not None else real_record(ARDRONE2_FILE)
     if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such file (set CDAM_SHARED_DATA?)")
+        raise FileNotFoundError(f"{path}: no such file (see data/README.md)")
     if not (np.isfinite(rate) and rate > 0):
         raise ValueError(f"rate: expected a positive rate in Hz, got {rate!r}")
     try:

@@ -1,4 +1,4 @@
-"""The EMPS benchmark records (Janot, Gautier, Brunot 2019; see ../shared/data/README.md).
+"""The EMPS benchmark records (Janot, Gautier, Brunot 2019; see data/emps/PROVENANCE.md).
 
 ``load_emps("DATA_EMPS")`` or ``load_emps("DATA_EMPS_PULSES")`` reads the MATLAB file with
 ``scipy.io.loadmat`` and returns the signals as 1-D float arrays: ``t`` (s), ``qm`` (motor
@@ -12,16 +12,16 @@ from pathlib import Path
 import numpy as np
 import scipy.io as sio
 
-from cdam_core.record.realdata import shared_data_dir
+from cdam_core.record.realdata import real_record
 
 NAMES = ("DATA_EMPS", "DATA_EMPS_PULSES")
 
 
 def emps_path(name: str = "DATA_EMPS") -> Path:
-    """Path of an EMPS record under ``shared_data_dir()/emps``."""
+    """Path of an EMPS record (``data/emps`` in the checkout, else the shared folder)."""
     if name not in NAMES:
         raise ValueError(f"name: unknown EMPS record {name!r}; known: {', '.join(NAMES)}")
-    return shared_data_dir() / "emps" / f"{name}.mat"
+    return real_record(f"emps/{name}.mat")
 
 
 def load_emps(name: str = "DATA_EMPS", path=None) -> dict:
