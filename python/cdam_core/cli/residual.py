@@ -188,9 +188,10 @@ def register(subparsers) -> None:
                                   "as a greybox model file here (docs/MODEL_FILE.md)")
     p.add_argument("--report", help="write a Markdown report with PNG figures into this folder")
     p.add_argument("--cutoff", type=float, default=None,
-                   help="derivative filter cutoff in Hz (default: 100 for rigid_axis and "
-                        "flexible_joint; 2 for the flight models' body channels, their joint "
-                        "channels use 20)")
+                   help="derivative filter cutoff in Hz (default: rigid_axis and "
+                        "flexible_joint choose one per position from the record, where its "
+                        "spectrum meets the encoder noise; the flight models use 2 Hz for the "
+                        "body channels and 20 Hz for the joints)")
     p.add_argument("--fixed", help="known parameters, e.g. m=1.82 (the weighed mass, which "
                                    "payload_mass needs)")
     p.add_argument("--alpha", type=float, default=0.01, help="significance level (default 0.01)")

@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from cdam_core.models.greybox.declared import DerivativeFilter
-from cdam_core.residual.cutoff import choose_cutoff
+from cdam_core.residual.cutoff import at_rest, choose_cutoff
 from cdam_core.models.greybox.registry import get_model
 from cdam_core.models.greybox.effects import LIBRARY, candidates as library_candidates
 from cdam_core.residual.selection import Selection, select
@@ -42,6 +42,8 @@ def analyse(model: str, t, signals: dict, extra: dict | None = None, fixed: dict
     else:   # chosen from the record (the flight models keep their documented bands)
         filt, choice = choose_cutoff(m, t, signals, extra, dec)
         trim = choice["trim_samples"]
+        cands = at_rest(m, cands, choice, alpha)
+        dec = [c for c in cands if c.name in set(declared)]
     sig = m.prepare(t, signals, filt, extra)
     val = None
     if validation is not None:

@@ -18,6 +18,8 @@ model would otherwise pick the filter that hides what it lacks).
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 from scipy import signal as sps
 from scipy import stats
@@ -25,7 +27,7 @@ from scipy import stats
 from cdam_core.models.greybox.declared import DerivativeFilter, SignalFilters
 from cdam_core.residual.validation import motion_horizon
 
-__all__ = ["choose_cutoff", "edge_trim", "noise_cutoff"]
+__all__ = ["at_rest", "choose_cutoff", "edge_trim", "noise_cutoff"]
 
 TOP = 0.4            # highest cut-off, x the sampling rate
 FLOOR_BAND = 0.35    # noise level read above this fraction of the sampling rate
@@ -78,3 +80,27 @@ def choose_cutoff(model, t, raw: dict, extra: dict | None = None, declared_effec
                           f"[{lowest:.3g}, {TOP * fs:.4g}] Hz",
                   "chosen_hz": {p: float(v) for p, v in cut.items()}, "signals": evidence,
                   "trim_samples": trim}
+
+
+def velocity_noise(noise_level: float, cutoff_hz: float) -> float:
+    """Standard deviation of the velocity that white position noise of one-sided density
+    ``noise_level`` (units^2 / Hz) leaves after differentiation through an ideal low-pass at
+    ``cutoff_hz``: sqrt(int_0^fc (2 pi f)^2 N0 df) = 2 pi sqrt(N0 fc^3 / 3)."""
+    return float(2 * np.pi * np.sqrt(max(noise_level, 0.0) * cutoff_hz ** 3 / 3.0))
+
+
+def at_rest(model, candidates, choice: dict, alpha: float) -> list:
+    """Dry-friction candidates that leave out the rows at rest: those whose velocity is not
+    distinguishable from zero at level ``alpha`` given the encoder noise (two-sided normal
+    quantile x :func:`velocity_noise` of the velocity's position)."""
+    z = float(stats.norm.ppf(1 - alpha / 2))
+    out = []
+    for c in candidates:
+        if c.name == "coulomb_friction" and not getattr(c, "smooth", False):
+            pos = model.viscous[c.channel][1][:-2]     # "theta_m_d" -> "theta_m"
+            ev = choice["signals"].get(pos, {})
+            fc = choice["chosen_hz"].get(pos)
+            if fc and ev.get("noise_level"):
+                c = replace(c, rest_speed=z * velocity_noise(ev["noise_level"], fc))
+        out.append(c)
+    return out

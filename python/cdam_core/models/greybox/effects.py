@@ -98,6 +98,9 @@ class CoulombFriction(Effect):
 
     eps: float = 0.0
     smooth: bool = False
+    # rows whose velocity is within this of zero are left out of the fit: at rest the dry
+    # friction is anywhere in [-Fc, Fc] (stiction) and a sign regressor is wrong there
+    rest_speed: float = 0.0
     name = "coulomb_friction"
     edge_identified = True   # eps = 0 (a plain sign) at the edge of the search is a valid answer
     search_grid = 7          # coarse grid, then a bounded 1-D search (selection._fit_with)
@@ -119,6 +122,12 @@ class CoulombFriction(Effect):
 
     def bounds(self) -> dict:
         return {_p(self, "Fc"): (0.0, float("inf"))}   # dry friction opposes the motion
+
+    def moving_rows(self, s, model) -> np.ndarray | None:
+        """Rows the fit may use (None: all): away from rest, see ``rest_speed``."""
+        if self.rest_speed <= 0:
+            return None
+        return np.abs(np.asarray(s[model.viscous[self.channel][1]], dtype=float)) > self.rest_speed
 
     def parameters(self, theta, model):
         out = super().parameters(theta, model)

@@ -177,17 +177,22 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None,
     if trim < 0 or 2 * trim >= n - 10:
         raise ValueError(f"trim: {trim} leaves too few of the {n} samples")
     keep = slice(trim, n - trim)
+    s, eqs = design(model, sig, effects)
     if rows is not None:
         rows = np.asarray(rows)
         if rows.dtype != bool or rows.shape != (n,):
             raise ValueError(f"rows: expected a boolean mask of {n} samples")
+    for e in effects:   # rows an effect cannot describe (a sign term at rest)
+        moving = e.moving_rows(s, model) if hasattr(e, "moving_rows") else None
+        if moving is not None:
+            rows = moving if rows is None else rows & moving
+    if rows is not None:
         inner = np.zeros(n, dtype=bool)
         inner[keep] = True
         keep = np.flatnonzero(inner & rows)
         if keep.size < 10:
             raise ValueError(f"rows: {keep.size} rows left to fit")
         base = None   # blocks are reused only between fits of the same rows
-    s, eqs = design(model, sig, effects)
     names = []
     for _, cols in eqs.values():
         names += [p for p in cols if p not in names]

@@ -1,0 +1,133 @@
+"""The residual loop on records it was not written against ([greybox] item 7).
+
+Records from ``joint_generator`` (plain numpy, its own RK4, not ``cdam_core.sim``): joints in a
+horizontal and a vertical plane, open-loop torque and PD loops closed on the measured motor or
+link angle, coarse and noisy encoders, 250 Hz to 1 kHz. Truths are the generator's parameters;
+the 5 % bound on the well-excited parameters is the issue's. Figures measured when written
+(relative errors): A Im +0.4 %, Dm -0.5 %, Ks 0.0 %, I 0.0 %, Dl 0.0 %; B (vertical, motor PD,
+500 Hz, 4096-count link encoder) Im -2.1 %, Dm -3.3 %, Ks -0.4 %, I +4.3 %, Dl -0.5 %, G +9 %;
+C (link PD, 250 Hz, dry friction) Im +2.3 %, Ks -0.2 %, I +1.4 %, Dl -0.2 %, Dm +7.5 %, Fc -15 %.
+"""
+from functools import lru_cache
+
+import numpy as np
+import pytest
+
+from cdam_core.residual.analyse import analyse
+from cdam_core.residual.cutoff import noise_cutoff
+from cdam_core.residual.validation import motion_horizon
+
+from joint_generator import Joint, rigid_axis
+
+CONDITIONS = {
+    "horizontal_open_1k": Joint(),
+    "vertical_motor_pd_500_coarse_link": Joint(fs=500, plane="vertical", control="motor",
+                                               link_counts=4096, link_noise=2e-4,
+                                               motor_counts=16384),
+    "horizontal_link_pd_250_dry_friction": Joint(fs=250, control="link", Fc=0.05,
+                                                 motor_counts=16384, link_counts=16384),
+    "horizontal_open_1k_hardening": Joint(K3=400.0),
+    # 2.35 Hz: more than the Hann main lobe (2 bins of 0.2 Hz) from every excitation line
+    "vertical_open_1k_periodic": Joint(plane="vertical", periodic=(0.05, 2.35)),
+}
+WELL_EXCITED = ("Im", "Ks", "I", "Dl")
+
+
+@lru_cache(maxsize=None)
+def _run(name):
+    r = CONDITIONS[name].record()
+    sel = analyse("flexible_joint", r["t"], {k: r[k] for k in ("tau_m", "theta_m", "q")},
+                  free_run=False)
+    return r, sel
+
+
+def _found(sel):
+    return {(s.candidate.effect.name, s.candidate.effect.channel) for s in sel.steps}
+
+
+@pytest.mark.parametrize("name", ["horizontal_open_1k", "vertical_motor_pd_500_coarse_link",
+                                  "horizontal_link_pd_250_dry_friction"])
+def test_well_excited_parameters_within_5_percent(name):
+    r, sel = _run(name)
+    for p in WELL_EXCITED + (("Dm",) if "friction" not in name else ()):
+        assert sel.final.theta[p] == pytest.approx(r["truth"][p], rel=0.05), p
+
+
+@pytest.mark.xfail(strict=True, reason="dry friction under a link PD loop at 250 Hz: Fc 15 % "
+                   "low and Dm 7.5 % high (plain sign against the generator's steep tanh, "
+                   "torque not filtered like the regressors); open")
+def test_dry_friction_under_link_control_within_5_percent():
+    r, sel = _run("horizontal_link_pd_250_dry_friction")
+    eff = next(s.candidate.effect for s in sel.steps if s.candidate.effect.name == "coulomb_friction")
+    assert eff.parameters(sel.final.theta, sel.final.model)["Fc"] == pytest.approx(0.05, rel=0.05)
+    assert sel.final.theta["Dm"] == pytest.approx(r["truth"]["Dm"], rel=0.05)
+
+
+@pytest.mark.parametrize("name", ["horizontal_open_1k", "vertical_motor_pd_500_coarse_link"])
+def test_no_finding_without_an_effect(name):
+    assert _found(_run(name)[1]) == set()
+
+
+def test_gravity_enters_only_in_a_vertical_plane():
+    dropped = {n: [d["term"] for d in _run(n)[1].settings["declared_terms_dropped"]]
+               for n in ("horizontal_open_1k", "vertical_motor_pd_500_coarse_link")}
+    assert "G" in dropped["horizontal_open_1k"]
+    assert "G" not in dropped["vertical_motor_pd_500_coarse_link"]
+    r, sel = _run("vertical_motor_pd_500_coarse_link")
+    assert sel.final.theta["G"] == pytest.approx(r["truth"]["G"], rel=0.15)
+    assert _run("horizontal_open_1k")[1].final.theta["G"] == 0.0
+
+
+def test_hidden_effects_named_on_the_right_equation():
+    assert ("coulomb_friction", "tau_m") in _found(_run("horizontal_link_pd_250_dry_friction")[1])
+    sel = _run("horizontal_open_1k_hardening")[1]
+    assert _found(sel) == {("hardening_stiffness", "tau_l")}
+    eff = sel.steps[0].candidate.effect
+    assert eff.parameters(sel.final.theta, sel.final.model)["K3"] == pytest.approx(400.0, rel=0.05)
+
+
+def test_periodic_disturbance_reported_with_its_frequency():
+    r, sel = _run("vertical_open_1k_periodic")
+    assert _found(sel) == set()
+    lines = [u for u in sel.unexplained if u["kind"] == "periodic_line" and u["channel"] == "tau_l"]
+    assert lines and abs(lines[0]["frequency_hz"] - 2.35) <= 0.2, sel.unexplained
+    assert lines[0]["amplitude"] == pytest.approx(0.05, rel=0.2)
+
+
+def test_coarse_encoder_gets_a_lower_cutoff():
+    cut = _run("vertical_motor_pd_500_coarse_link")[1].settings["filter_choice"]["chosen_hz"]
+    fine = _run("horizontal_open_1k")[1].settings["filter_choice"]["chosen_hz"]
+    assert cut["q"] < cut["theta_m"] < 0.1 * fine["theta_m"]
+
+
+def test_noise_cutoff_against_a_known_spectrum():
+    """Sines up to 20 Hz under white noise: the cut-off keeps the 20 Hz line and stops within
+    the Hann window's leakage of it (a few 0.49 Hz bins for a line 10^5 above the noise)."""
+    fs, n = 1000.0, 20000
+    t = np.arange(n) / fs
+    x = sum(np.sin(2 * np.pi * f * t) / f ** 2 for f in (1.0, 4.0, 9.0, 20.0))
+    x = x + np.random.default_rng(0).normal(0, 1e-4, n)
+    fc, ev = noise_cutoff(x, fs)
+    assert 20.0 <= fc <= 21.5
+    # the noise level is the white noise's one-sided density 2 sigma^2 / fs
+    assert ev["noise_level"] == pytest.approx(2 * 1e-8 / fs, rel=0.2)
+
+
+def test_motion_horizon_of_a_sine():
+    """The autocorrelation of a sine's velocity is cos(2 pi f tau): it falls below 1/e at
+    tau = arccos(1/e) / (2 pi f)."""
+    fs, f = 1000.0, 1.3
+    t = np.arange(200000) / fs
+    v = np.cos(2 * np.pi * f * t)
+    h = motion_horizon({"x_d": v}, ["x"])
+    assert h / fs == pytest.approx(np.arccos(1 / np.e) / (2 * np.pi * f), rel=0.01)
+
+
+def test_rigid_axis_with_a_coarse_encoder():
+    r = rigid_axis(fs=500.0, counts=8192, noise=1e-4, Fc=1.0)
+    sel = analyse("rigid_axis", r["t"], {"tau": r["tau"], "q": r["q"]}, free_run=False)
+    assert ("coulomb_friction", "tau") in _found(sel)
+    for p in ("M", "Fv"):
+        assert sel.final.theta[p] == pytest.approx(r["truth"][p], rel=0.05), p
+    fc = sel.final.theta["coulomb_friction@tau.Fc"]
+    assert fc == pytest.approx(1.0, rel=0.05)
