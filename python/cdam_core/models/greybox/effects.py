@@ -252,17 +252,10 @@ class ActuatorDelay(Effect):
         return next(iter(equations))
 
     def search_bounds(self, s, model):
-        # Shortest delay claimed: one sample and half a period of the derivative filter's
-        # cutoff (5 ms at 100 Hz). Shorter shifts are within the phase errors of the zero-order
-        # hold (half a sample), the filter and unmodelled fast dynamics (on EMPS with pulses a
-        # 1.3 ms "delay" would absorb the 24 Hz flexibility), so they are not resolved.
-        # With parallel filtering (flight models) both sides of the equation share the
-        # filter's phase, so the floor is two samples.
-        filt = s.get("filter")
-        if getattr(model, "parallel_filter", False):
-            lo = 2.0 * float(s["dt"])
-        else:
-            lo = max(float(s["dt"]), 0.5 / filt.cutoff_hz if filt is not None else 0.0)
+        # Shortest delay searched: one sample, whatever the filter (the held-out test decides
+        # whether a short delay predicts better; residual.validation). With parallel filtering
+        # (flight models) both sides of the equation share the filter's phase; one sample too.
+        lo = float(s["dt"])
         return lo, max(float(self.max_delay), lo)
 
     def transform_inputs(self, s, model):

@@ -215,7 +215,8 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None,
     for e in effects:
         bounds.update(e.bounds())
     for comp in _components(eqs, est):
-        if (sigs is not None and bsigs is not None and base.keep == keep
+        if (sigs is not None and bsigs is not None and isinstance(base.keep, slice)
+                and base.keep == keep
                 and all(bsigs.get(eq) == sigs[eq] for eq in comp)):
             for eq in comp:
                 resid[eq] = base.residuals[eq]
@@ -449,7 +450,8 @@ def free_run_error(fitted: Fit, sig: dict, substeps: int | None = None) -> tuple
     model = fitted.model
     # start after the filter's edge (``trim`` samples), from the filtered position and velocity
     n = sig["t"].size
-    k0 = min(fitted.keep.start, n - 3)
+    keep = fitted.keep
+    k0 = min(keep.start if isinstance(keep, slice) else int(keep[0]), n - 3)
     s_eff = apply_effects(model, sig, fitted.effects)
     pre_all = {e.key: e.columns(s_eff) for e in fitted.effects if hasattr(e, "columns")}
     window = getattr(model, "free_run_window", None)
@@ -483,7 +485,8 @@ def apply_fit(fitted: Fit, sig: dict, trim: int | None = None) -> Fit:
     """The equation errors of an already estimated model on another record (no re-estimation)."""
     model = fitted.model
     n = sig["t"].size
-    trim = fitted.keep.start if trim is None else int(trim)
+    first = fitted.keep.start if isinstance(fitted.keep, slice) else int(fitted.keep[0])
+    trim = first if trim is None else int(trim)
     if trim < 0 or 2 * trim >= n - 10:
         raise ValueError(f"trim: {trim} leaves too few of the {n} samples")
     keep = slice(trim, n - trim)
