@@ -17,7 +17,8 @@ from cdam_core.firmware.export import (OPTIM_DATA_SEED, OPTIM_SAMPLES, OPTIM_SHA
                                        export_optim_data, optim_data)
 from cdam_core.firmware.model import (FirmwareModel, StepFirmwareModel, load_firmware_model,
                                       theta_fnv1a)
-from cdam_core.firmware.paths import ARM_GCC, FIRMWARE_DIR, QEMU, toolchain_available
+from cdam_core.firmware.paths import (ARM_GCC, FIRMWARE_DIR, QEMU, firmware_sources,
+                                     missing_tools, toolchain_available)
 from cdam_core.firmware.pil import (JointPlant, closed_loop_pil, closed_loop_python,
                                     default_reference, pid_config)
 from cdam_core.firmware.qemu import (run_equivalence, run_kernels, run_optim_host,
@@ -27,8 +28,8 @@ __all__ = [
     "ARM_GCC", "FIRMWARE_DIR", "FirmwareModel", "IMAGES", "JointPlant", "OPTIM_DATA_SEED",
     "OPTIM_SAMPLES", "OPTIM_SHAPE", "QEMU", "STEP_IMAGES", "StepFirmwareModel", "build", "check",
     "closed_loop_pil", "closed_loop_python", "default_inputs", "default_record",
-    "default_reference", "export_header", "export_optim_data", "heap_guard_works",
-    "load_firmware_model", "optim_data", "pid_config", "run_equivalence", "run_kernels",
-    "run_optim_host", "run_optim_target", "run_qemu", "run_step_equivalence", "theta_fnv1a",
-    "toolchain_available",
+    "default_reference", "export_header", "export_optim_data", "firmware_sources",
+    "heap_guard_works", "load_firmware_model", "missing_tools", "optim_data", "pid_config",
+    "run_equivalence", "run_kernels", "run_optim_host", "run_optim_target", "run_qemu",
+    "run_step_equivalence", "theta_fnv1a", "toolchain_available",
 ]
