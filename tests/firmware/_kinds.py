@@ -177,3 +177,29 @@ def rigid_twin32(p, U, Y, mode, inertia=None):
             x = F32(x + F32(h * v))
         out.append(x)
     return np.array(out, dtype=F32)[:, None]
+
+
+FLEX_EFFECTS = [{"name": "backlash", "channel": "tau_l", "width": 0.02},
+                {"name": "hardening_stiffness", "channel": "tau_l"},
+                {"name": "coulomb_friction", "channel": "tau_m", "eps": 0.01, "smooth": True},
+                {"name": "asymmetric_friction", "channel": "tau_l"},
+                {"name": "payload_mass", "channel": "tau_l", "length": 0.3},
+                {"name": "actuator_delay", "channel": "tau_m", "delay": 0.0025}]
+
+
+def flexible_file(path):
+    """A flexible_joint grey-box model (one cable-driven joint) with every effect the library
+    has for it: backlash, a hardening cable, smoothed Coulomb friction on the motor,
+    asymmetric friction on the link, a payload and an actuator delay; 4 substeps."""
+    names = ["Im", "Dm", "Ks", "Kd", "I", "Dl", "G", "hardening_stiffness@tau_l.K3",
+             "coulomb_friction@tau_m.Fc", "asymmetric_friction@tau_l.dFv",
+             "asymmetric_friction@tau_l.dFc", "payload_mass@tau_l.m"]
+    values = [0.01, 0.1, 20.0, 0.05, 0.02, 0.05, 0.5, 300.0, 0.05, 0.01, 0.02, 0.2]
+    d = {"declared": "flexible_joint", "dt": 0.001, "n_inputs": 1, "n_outputs": 2,
+         "fixed": {"I": 0.02, "G": 0.5}, "extra_columns": [],
+         "filter": {"cutoff_hz": 100.0, "order": 4}, "effects": FLEX_EFFECTS,
+         "parameters": {"names": names, "values": values, "std": [None] * len(names),
+                        "estimated": [n for n in names if n not in ("I", "G")]},
+         "substeps": 4}
+    save_model(path, GreyBox.from_dict(d), inputs=["tau_m1"], outputs=["theta_m1", "q1"])
+    return path

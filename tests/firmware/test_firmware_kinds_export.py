@@ -13,8 +13,8 @@ from cdam_core import firmware as fw
 from cdam_core.cli.main import main
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _kinds import (RIGID, arx_file, arx_twin32, greybox_file, hybrid_file,  # noqa: E402
-                    rigid_record, rigid_twin32)
+from _kinds import (RIGID, arx_file, arx_twin32, flexible_file, greybox_file,  # noqa: E402
+                    hybrid_file, rigid_record, rigid_twin32)
 
 HOSTILE = '"); system("rm -rf /'
 
@@ -113,20 +113,48 @@ def test_a_hostile_name_is_refused_before_any_header(tmp_path):
     assert not out.exists()
 
 
+def test_flexible_joint_header(tmp_path):
+    from cdam_core.firmware.step import G0
+    from cdam_core.models.greybox.effects import G0 as LIBRARY_G0
+    assert G0 == LIBRARY_G0
+    text = fw.export_header(flexible_file(tmp_path / "fj.json"), tmp_path / "m.hpp").read_text()
+    assert "#define CDAM_MODEL_DECLARED 1" in text
+    # Im, Dm, Ks, Kd, I, Dl, G in the declared model's order
+    np.testing.assert_array_equal(_array(text, "kBase").astype(np.float32),
+                                  np.float32([0.01, 0.1, 20.0, 0.05, 0.02, 0.05, 0.5]))
+    # backlash, hardening, coulomb (motor), asymmetric (link), payload, delay (motor input)
+    assert re.search(r"kEffectCode\[6\] = \{5, 6, 1, 2, 7, 4\}", text)
+    assert re.search(r"kEffectEq\[6\] = \{1, 1, 0, 1, 1, 0\}", text)
+    # the velocity of each channel's viscous term: theta_m for tau_m, q for tau_l
+    assert re.search(r"kEffectVel\[6\] = \{1, 1, 0, 1, 1, 0\}", text)
+    par = _array(text, "kEffectParam").astype(np.float32).reshape(6, 4)
+    assert par[0, 0] == np.float32(0.01)                       # half the backlash width
+    assert par[2, :2].tolist() == [np.float32(0.05), np.float32(0.01)]   # Fc, tanh width
+    assert par[3, 2] == 1.0                                    # no offset: dFc column
+    assert par[4, 1] == np.float32(9.81 * 0.3)                # g l of the payload
+    # how the accelerations enter: diag(1 / Im, 1 / (I + m l^2)) for this model
+    np.testing.assert_allclose(_array(text, "kInertia"),
+                               [1 / 0.01, 0, 0, 1 / (0.02 + 0.2 * 0.09)], rtol=1e-7)
+
+
 def test_unsupported_greybox_is_named(tmp_path):
     from cdam_core.models.file import save_model
     from cdam_core.models.greybox.augmented import GreyBox
-    names = ["Im", "Dm", "Ks", "Kd", "I", "Dl", "G"]
+    from cdam_core.models.greybox.registry import get_model
+    m = get_model("quadrotor")
+    names = list(m.parameter_names)
     g = GreyBox.from_dict({
-        "declared": "flexible_joint", "dt": 0.001, "n_inputs": 1, "n_outputs": 2, "fixed": {},
-        "extra_columns": [], "filter": {"cutoff_hz": 100.0, "order": 4}, "effects": [],
-        "parameters": {"names": names, "values": [0.01, 0.1, 20.0, 0.05, 0.02, 0.05, 0.5],
-                       "std": [None] * 7, "estimated": names}, "substeps": 2})
-    save_model(tmp_path / "fj.json", g)
-    with pytest.raises(ValueError, match="flexible_joint.*cannot run on the firmware"):
-        fw.load_firmware_model(tmp_path / "fj.json")
-    assert main(["export-firmware", str(tmp_path / "fj.json"), "-o",
+        "declared": "quadrotor", "dt": 0.01, "n_inputs": len(m.inputs),
+        "n_outputs": len(m.positions), "fixed": {}, "extra_columns": [],
+        "filter": {"cutoff_hz": 2.0, "order": 4}, "effects": [],
+        "parameters": {"names": names, "values": [1.0] * len(names),
+                       "std": [None] * len(names), "estimated": names}, "substeps": 1})
+    save_model(tmp_path / "quad.json", g)
+    with pytest.raises(ValueError, match="quadrotor.*cannot run on the firmware"):
+        fw.load_firmware_model(tmp_path / "quad.json")
+    assert main(["export-firmware", str(tmp_path / "quad.json"), "-o",
                  str(tmp_path / "m.hpp")]) == 2
+    assert not (tmp_path / "m.hpp").exists()
 
 
 def test_cli_export_every_kind(tmp_path, capsys):

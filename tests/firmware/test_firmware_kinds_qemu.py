@@ -1,7 +1,8 @@
 """Every dynamic model kind on the emulated STM32F405 (qemu-system-arm -M netduinoplus2): arx
 (raw and physics features), hybrid (ARX + residual network), greybox (rigid axis with Coulomb
-and asymmetric friction, an external force and an actuator delay; and the EMPS axis fitted by
-the residual loop when the shared data are there).
+and asymmetric friction, an external force and an actuator delay; a flexible joint with every
+effect of its library; the joint the residual loop finds on a simulated arm with friction; and
+the EMPS axis fitted by the residual loop when the shared data are there).
 
 The firmware is compared with the Python model (float64) and, for arx and greybox, bit for bit
 with a plain numpy float32 twin written from the equations (tests/firmware/_kinds.py). Skipped
@@ -19,8 +20,8 @@ from cdam_core import firmware as fw
 from cdam_core.models.file import load_model
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _kinds import (RIGID, arx_file, arx_twin32, greybox_file, hybrid_file,  # noqa: E402
-                    rigid_record, rigid_twin32)
+from _kinds import (RIGID, arx_file, arx_twin32, flexible_file, greybox_file,  # noqa: E402
+                    hybrid_file, rigid_record, rigid_twin32)
 
 pytestmark = [pytest.mark.slow,
               pytest.mark.skipif(fw.toolchain_available() is not None,
@@ -120,6 +121,42 @@ def test_hybrid_on_the_board_matches_python(hybrid):
         assert res["max_abs_error"] <= (1e-5 if mode == "one_step" else 1e-4) * span
         _common(res, sizes)
         print("hybrid", mode, {k: v for k, v in res.items() if k != "outputs"}, sizes["fw_step"])
+
+
+def test_flexible_joint_with_every_effect_matches_python(tmp_path):
+    path = flexible_file(tmp_path / "fj.json")
+    g = load_model(path)
+    rng = np.random.default_rng(8)
+    U = np.repeat(rng.uniform(-1.5, 1.5, (40, 1)), 20, axis=0)
+    Y = _record(g, U)
+    res = fw.check(path, build_dir=tmp_path / "b", record=(U, Y))
+    print("flexible", res)
+    # sin and tanh of newlib (float) against numpy's (double): rounding level
+    assert res["max_abs_error"] <= 1e-5 * res["output_span"]
+    assert res["max_abs_error_free_run"] <= 1e-4 * res["output_span"]
+    assert res["heap_free"] and res["instructions_per_step"] <= STEP_BUDGET
+
+
+def test_simulated_arm_found_effect(tmp_path):
+    """cdam simulate (joint excitation, Coulomb friction on motor 1) -> cdam residual
+    --model flexible_joint --save -> the saved model on the board, on the simulated record."""
+    from cdam_core.cli.main import main
+    from cdam_core.record.dataset import read_dataset
+    rec, model = tmp_path / "arm.csv", tmp_path / "arm_model.json"
+    assert main(["simulate", "--experiment", "ii", "--duration", "6", "--seed", "1",
+                 "--effect", "coulomb_friction:Fc1=0.05", "-o", str(rec)]) == 0
+    assert main(["residual", str(rec), "--model", "flexible_joint", "--no-free-run",
+                 "--save", str(model)]) == 0
+    doc = json.loads(model.read_text())
+    assert "coulomb_friction" in [e["name"] for e in doc["model"]["effects"]]
+    ds = read_dataset(rec)
+    n = 2000
+    U = np.column_stack([ds.column(c) for c in doc["inputs"]])[:n]
+    Y = np.column_stack([ds.column(c) for c in doc["outputs"]])[:n]
+    res = fw.check(model, build_dir=tmp_path / "b", record=(U, Y))
+    print("simulated arm", res)
+    assert res["max_abs_error"] <= 1e-5 * res["output_span"]
+    assert res["heap_free"] and res["instructions_per_step"] <= STEP_BUDGET
 
 
 def test_cli_check_reports_every_figure(greybox, tmp_path):

@@ -155,7 +155,8 @@ inline std::uint32_t params_fnv1a() {
 // in the Python order: the declared model's, then each effect's. The input of row t-1 drives the
 // step to row t; a measured row sets x = y(t) and v = (y(t) - y(t-1)) / dt.
 namespace effect {   // codes written by the exporter (cdam_core.firmware.step.EFFECT_CODES)
-constexpr int kCoulomb = 1, kAsymmetric = 2, kExternalForce = 3, kDelay = 4;
+constexpr int kCoulomb = 1, kAsymmetric = 2, kExternalForce = 3, kDelay = 4, kBacklash = 5,
+              kHardening = 6, kPayload = 7;
 }
 
 class StepModel {
@@ -171,7 +172,7 @@ class StepModel {
   }
 
   void step(const float* u, float* y) {
-    float ue[kU];
+    float ue[kU > 0 ? kU : 1];
     effective_input(ue);   // the input of row t-1, after the effects' delays
     constexpr float h = cdam_model::kH;
     for (int s = 0; s < cdam_model::kSubsteps; ++s) {
@@ -235,19 +236,38 @@ class StepModel {
     }
   }
 
+  // Equation errors at zero acceleration, each equation's columns in GreyBox's order: the
+  // declared model's, then each effect's (the acceleration columns vanish exactly: 0 * theta).
   void errors(const float* u, float* e) const {
-    const float* th = cdam_model::kBase;
+    const float* th = cdam_model::kBase;   // the declared model's parameter_names, in order
 #if CDAM_MODEL_DECLARED == 0
-    // rigid_axis: tau = M q'' + Fv q' + offset (q'' = 0 here: the M term vanishes exactly)
-    const float v = v_[0];
-    float r = u[0];
-    r = r - th[1] * v;
-    r = r - th[2] * 1.0f;
+    // rigid_axis: tau = M q'' + Fv q' + offset
+    e[0] = u[0];
+    e[0] = e[0] - th[1] * v_[0];
+    e[0] = e[0] - th[2] * 1.0f;
+#elif CDAM_MODEL_DECLARED == 1
+    // flexible_joint [Im, Dm, Ks, Kd, I, Dl, G], positions (theta_m, q), cable deflection
+    // d = theta_m - q (through a backlash dead band if the model has one), rate dd:
+    //   tau_m: tau_m = Im thm'' + Dm thm' + Ks d + Kd dd
+    //   tau_l: 0 = I q'' + Dl q' + G sin q - Ks d - Kd dd
+    const float d = deflection();
+    const float dd = v_[0] - v_[1];
+    e[0] = u[0];
+    e[0] = e[0] - th[1] * v_[0];
+    e[0] = e[0] - th[2] * d;
+    e[0] = e[0] - th[3] * dd;
+    e[1] = 0.0f;
+    e[1] = e[1] - th[5] * v_[1];
+    e[1] = e[1] - th[6] * std::sin(x_[1]);
+    e[1] = e[1] - th[2] * -d;
+    e[1] = e[1] - th[3] * -dd;
 #else
 #error "declared model not supported on the firmware"
 #endif
     for (int k = 0; k < kE; ++k) {
       const float* p = &cdam_model::kEffectParam[k * 4];
+      float& r = e[cdam_model::kEffectEq[k]];
+      const float v = v_[cdam_model::kEffectVel[k]];
       switch (cdam_model::kEffectCode[k]) {
         case effect::kCoulomb: {   // Fc sign(v), or Fc tanh(v / eps)
           const float s = p[1] > 0.0f ? std::tanh(v / p[1])
@@ -264,12 +284,36 @@ class StepModel {
         case effect::kExternalForce:   // gain (-u_extra)
           r = r - p[0] * -u[cdam_model::kEffectIndex[k]];
           break;
-        default:
+#if CDAM_MODEL_DECLARED == 1
+        case effect::kHardening: {   // K3 d^3 on the motor side, -K3 d^3 on the link side
+          const float d3 = (d * d) * d;
+          e[0] = e[0] - p[0] * d3;
+          e[1] = e[1] - p[0] * -d3;
+          break;
+        }
+        case effect::kPayload:   // m (l^2 q'' + g l sin q) on the link side, q'' = 0
+          r = r - p[0] * (0.0f + p[1] * std::sin(x_[1]));
+          break;
+#endif
+        default:   // delays and backlash act on the inputs and the deflection, not here
           break;
       }
     }
-    e[0] = r;
   }
+
+#if CDAM_MODEL_DECLARED == 1
+  // sign(d) max(|d| - width / 2, 0) when the model has a backlash (Backlash.transform_state)
+  float deflection() const {
+    const float d = x_[0] - x_[1];
+    for (int k = 0; k < kE; ++k) {
+      if (cdam_model::kEffectCode[k] != effect::kBacklash) continue;
+      const float h = cdam_model::kEffectParam[k * 4];
+      const float m = std::fabs(d) - h;
+      return static_cast<float>((d > 0.0f) - (d < 0.0f)) * (m > 0.0f ? m : 0.0f);
+    }
+    return d;
+  }
+#endif
 
   float x_[kN] = {}, v_[kN] = {}, xlast_[kN] = {}, xprev_[kN] = {};
   float u_[kRing][kU] = {};

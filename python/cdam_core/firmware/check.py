@@ -26,8 +26,14 @@ def _input_range(fm: StepFirmwareModel):
     i, a = fm.ints, fm.arrays
     n = fm.n_inputs
     if fm.kind == "greybox":
-        # a force beyond the friction and the offset, so that the axis moves both ways
-        amp = 2.0 * (abs(a["kBase"][2]) + np.sum(np.abs(a["kEffectParam"][0::4]))) + 1.0
+        # a force beyond the static ones (offset or gravity, dry friction, a payload's weight),
+        # so that the axis moves both ways
+        par = np.asarray(a["kEffectParam"], np.float64).reshape(-1, 4)
+        code = np.asarray(fm.int_arrays["kEffectCode"])[:len(par)]
+        static = abs(a["kBase"][2] if fm.macros["CDAM_MODEL_DECLARED"] == 0 else a["kBase"][6])
+        static += np.sum(np.abs(par[code == 1, 0])) + np.sum(np.abs(par[code == 7, 0] *
+                                                                    par[code == 7, 1]))
+        amp = 4.0 * static + 1.0
         return np.full(n, -amp), np.full(n, amp)
     if i["kPhysics"]:   # motor commands, 0 .. their training maximum
         return np.zeros(n), np.asarray(a["kFeatureScale"], np.float64)

@@ -21,9 +21,10 @@ import numpy as np
 from cdam_core.firmware.numbers import c_array, c_float, c_int_array, finite32, theta_fnv1a
 
 KIND_CODES = {"bp_network": 0, "arx": 1, "hybrid": 2, "greybox": 3}
-DECLARED_CODES = {"rigid_axis": 0}
+DECLARED_CODES = {"rigid_axis": 0, "flexible_joint": 1}
 EFFECT_CODES = {"coulomb_friction": 1, "asymmetric_friction": 2, "external_force": 3,
-                "actuator_delay": 4}
+                "actuator_delay": 4, "backlash": 5, "hardening_stiffness": 6, "payload_mass": 7}
+G0 = 9.81   # cdam_core.models.greybox.effects.G0 (payload_mass), checked by a test
 MAX_DELAY_ROWS = 4096      # input history the firmware keeps for an actuator delay
 MAX_COEFS = 100_000        # ARX rows x outputs (far above what the M4F's flash holds)
 MAX_SUBSTEPS = 1000        # grey-box substeps per sample on the target
@@ -158,22 +159,32 @@ def _greybox(mf) -> StepFirmwareModel:
         raise ValueError(f"MODEL: model.substeps: {sub} is outside 1..{MAX_SUBSTEPS} on the "
                          f"firmware")
     base = [g.theta_[p] for p in decl.parameter_names]
-    codes, index, lag, params = [], [], [], []
+    codes, eqs, vels, index, lag, params = [], [], [], [], [], []
     delayed = set()
+    equations = list(decl.equation_names)
     for j, e in enumerate(g.effects):
         if e.name not in EFFECT_CODES:
             raise ValueError(f"MODEL: model.effects[{j}]: effect {e.name!r} cannot run on the "
                              f"firmware yet (it runs {', '.join(EFFECT_CODES)})")
-        key = e.key
+        key, th = e.key, g.theta_
+        eq = equations.index(e.channel) if e.channel in equations else 0
+        vel = (list(decl.positions).index(decl.viscous[e.channel][1][:-2])
+               if e.channel in decl.viscous else 0)
         if e.name == "coulomb_friction":
-            rows = [(0, 0, [g.theta_[f"{key}.Fc"], float(e.eps), 0.0, 0.0])]
+            rows = [(0, 0, [th[f"{key}.Fc"], float(e.eps), 0.0, 0.0])]
         elif e.name == "asymmetric_friction":
             has_dfc = e.channel not in decl.offset
-            rows = [(0, 0, [g.theta_[f"{key}.dFv"],
-                            g.theta_[f"{key}.dFc"] if has_dfc else 0.0, float(has_dfc), 0.0])]
+            rows = [(0, 0, [th[f"{key}.dFv"], th[f"{key}.dFc"] if has_dfc else 0.0,
+                            float(has_dfc), 0.0])]
         elif e.name == "external_force":
             col = ni + list(g.extra_columns).index(e.column)
-            rows = [(col, 0, [g.theta_[f"{key}.gain"], 0.0, 0.0, 0.0])]
+            rows = [(col, 0, [th[f"{key}.gain"], 0.0, 0.0, 0.0])]
+        elif e.name == "backlash":
+            rows = [(0, 0, [0.5 * float(e.width), 0.0, 0.0, 0.0])]
+        elif e.name == "hardening_stiffness":
+            rows = [(0, 0, [th[f"{key}.K3"], 0.0, 0.0, 0.0])]
+        elif e.name == "payload_mass":
+            rows = [(0, 0, [th[f"{key}.m"], G0 * float(e.length), 0.0, 0.0])]
         else:   # actuator_delay: u(t - delay) by linear interpolation between two rows
             if float(e.delay) <= 0.0:
                 continue                        # Python leaves the inputs as they are
@@ -191,6 +202,8 @@ def _greybox(mf) -> StepFirmwareModel:
                 rows.append((cidx, L, [L * dt - float(e.delay), dt, 0.0, 0.0]))
         for col, L, p in rows:
             codes.append(EFFECT_CODES[e.name])
+            eqs.append(eq)
+            vels.append(vel)
             index.append(col)
             lag.append(L)
             params.append(p)
@@ -207,6 +220,7 @@ def _greybox(mf) -> StepFirmwareModel:
     fm.arrays = {"kBase": base, "kInertia": inertia,
                  # one row of four values per effect (a zero row when there is none)
                  "kEffectParam": np.asarray(params, np.float64).ravel() if E else np.zeros(4)}
-    fm.int_arrays = {"kEffectCode": codes or [0], "kEffectIndex": index or [0],
+    fm.int_arrays = {"kEffectCode": codes or [0], "kEffectEq": eqs or [0],
+                     "kEffectVel": vels or [0], "kEffectIndex": index or [0],
                      "kEffectLag": lag or [0]}
     return fm
