@@ -49,6 +49,17 @@ def test_arx_header_holds_the_file_coefficients(tmp_path):
     assert f"kParamsFnv1a = 0x{h:08X}u" in text
 
 
+def test_hybrid_without_its_network_is_the_arx_part(tmp_path):
+    from cdam_core.models.file import save_model
+    _, h = hybrid_file(tmp_path / "hybrid.json")
+    h.residual_weight_ = 0.0          # the network did not help: the file keeps it, unused
+    save_model(tmp_path / "h0.json", h)
+    text = fw.export_header(tmp_path / "h0.json", tmp_path / "model.hpp").read_text()
+    assert "#define CDAM_MODEL_HAS_NET 0" in text and "kNetTheta" not in text
+    np.testing.assert_array_equal(_array(text, "kCoef").astype(np.float32),
+                                  h.coef_.ravel().astype(np.float32))
+
+
 def test_hybrid_header_holds_the_network(tmp_path):
     path, h = hybrid_file(tmp_path / "hybrid.json")
     doc = json.loads(path.read_text())["model"]

@@ -2,8 +2,8 @@
 // network on its residual) and `greybox` (a declared model plus the effects the residual loop
 // found, integrated as cdam_core.models.greybox.augmented.GreyBox does). The numbers come from
 // generated/model.hpp (`cdam export-firmware`); the structure (which effect, which declared
-// model) is an integer code there, never a name. Fixed sizes, no heap, no libm except tanhf for
-// a smoothed Coulomb friction.
+// model) is an integer code there, never a name. Fixed sizes, no heap; libm only for tanhf (a
+// smoothed Coulomb friction) and sinf (the flexible joint's gravity and payload terms).
 //
 // One interface for every kind (rows t = 0, 1, ... of one record):
 //   prime(u, y)    rows 0 .. kHistory-1: a measured row (input u(t), output y(t)) as history;

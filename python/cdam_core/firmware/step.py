@@ -26,7 +26,7 @@ EFFECT_CODES = {"coulomb_friction": 1, "asymmetric_friction": 2, "external_force
                 "actuator_delay": 4, "backlash": 5, "hardening_stiffness": 6, "payload_mass": 7}
 G0 = 9.81   # cdam_core.models.greybox.effects.G0 (payload_mass), checked by a test
 MAX_DELAY_ROWS = 4096      # input history the firmware keeps for an actuator delay
-MAX_COEFS = 100_000        # ARX rows x outputs (far above what the M4F's flash holds)
+MAX_COEFS = 100_000        # ARX rows x outputs, network weights (above the M4F's flash)
 MAX_SUBSTEPS = 1000        # grey-box substeps per sample on the target
 
 
@@ -135,6 +135,9 @@ def _arx(mf) -> StepFirmwareModel:
     if has_net:
         if net.activation not in ("tansig", "logsig"):
             raise ValueError(f"MODEL: model.network.activation {net.activation!r} is not supported")
+        if np.asarray(net.theta_).size > MAX_COEFS:
+            raise ValueError(f"MODEL: model.network: {np.asarray(net.theta_).size} weights do "
+                             f"not fit the firmware (at most {MAX_COEFS})")
         fm.ints.update({"kNetInputs": int(net.n_inputs_), "kNetHidden": int(net.hidden_),
                         "kNetTansig": net.activation == "tansig"})
         fm.floats["kResidualWeight"] = float(m.residual_weight_)
