@@ -203,3 +203,24 @@ def flexible_file(path):
          "substeps": 4}
     save_model(path, GreyBox.from_dict(d), inputs=["tau_m1"], outputs=["theta_m1", "q1"])
     return path
+
+
+QUAD = {"names": ["m", "Kx", "Ky", "Kz", "Jx", "Jy", "Jz", "Kphi", "Ktheta", "Kpsi",
+                  "ground_effect@Z.k", "thrust_loss@Z.c", "payload_mass@Z.mass"],
+        "values": [1.8, 0.2, 0.2, 0.3, 0.02, 0.02, 0.04, 0.01, 0.01, 0.02, 1.0, 0.003, 0.2]}
+
+
+def quadrotor_file(path):
+    """A quadrotor grey-box model (flight.Quadrotor, dt 10 ms, 2 substeps) with the rotors'
+    shared delay, ground effect, thrust loss and a payload on Z."""
+    eff = [{"name": "actuator_delay", "channel": "rotors",
+            "channels": ["T", "tau_phi", "tau_theta", "tau_psi"], "delay": 0.025},
+           {"name": "ground_effect", "channel": "Z"}, {"name": "thrust_loss", "channel": "Z"},
+           {"name": "payload_mass", "channel": "Z"}]
+    d = {"declared": "quadrotor", "dt": 0.01, "n_inputs": 4, "n_outputs": 6,
+         "fixed": {"m": 1.8}, "extra_columns": [], "filter": {"cutoff_hz": 2.0, "order": 4},
+         "effects": eff, "parameters": {"names": QUAD["names"], "values": QUAD["values"],
+                                        "std": [None] * 13, "estimated": QUAD["names"][1:]},
+         "substeps": 2}
+    save_model(path, GreyBox.from_dict(d))
+    return path

@@ -13,8 +13,8 @@ from cdam_core import firmware as fw
 from cdam_core.cli.main import main
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _kinds import (RIGID, arx_file, arx_twin32, flexible_file, greybox_file,  # noqa: E402
-                    hybrid_file, rigid_record, rigid_twin32)
+from _kinds import (QUAD, RIGID, arx_file, arx_twin32, flexible_file,  # noqa: E402
+                    greybox_file, hybrid_file, quadrotor_file, rigid_record, rigid_twin32)
 
 HOSTILE = '"); system("rm -rf /'
 
@@ -148,22 +148,48 @@ def test_flexible_joint_header(tmp_path):
                                [1 / 0.01, 0, 0, 1 / (0.02 + 0.2 * 0.09)], rtol=1e-7)
 
 
+def test_quadrotor_header(tmp_path):
+    from cdam_core.firmware.step import G0
+    from cdam_core.models.greybox.flight import G0 as FLIGHT_G0
+    assert G0 == FLIGHT_G0
+    text = fw.export_header(quadrotor_file(tmp_path / "q.json"), tmp_path / "m.hpp").read_text()
+    assert "#define CDAM_MODEL_DECLARED 2" in text
+    np.testing.assert_array_equal(_array(text, "kBase").astype(np.float32),
+                                  np.float32(QUAD["values"][:10]))
+    # the shared rotor delay on each of the four commands, then ground effect, thrust loss,
+    # payload, all on Z (equation 2)
+    assert re.search(r"kEffectCode\[7\] = \{4, 4, 4, 4, 8, 9, 7\}", text)
+    assert re.search(r"kEffectIndex\[7\] = \{0, 1, 2, 3, 0, 0, 0\}", text)
+    assert re.search(r"kEffectEq\[7\] = \{0, 0, 0, 0, 2, 2, 2\}", text)
+    assert re.search(r"kEffectLag\[7\] = \{3, 3, 3, 3, 0, 0, 0\}", text)
+    par = _array(text, "kEffectParam").astype(np.float32).reshape(7, 4)
+    assert par[4, :2].tolist() == [1.0, np.float32(0.127)]   # k, the rotor radius
+    # accelerations: X, Y, Z by m (+ the payload on Z), the moments by Jx, Jy, Jz
+    inv = _array(text, "kInertia").reshape(6, 6)
+    want = np.zeros((6, 6))
+    for pos, eq, mass in ((3, 0, 1.8), (4, 1, 1.8), (5, 2, 2.0), (0, 3, 0.02), (1, 4, 0.02),
+                          (2, 5, 0.04)):
+        want[pos, eq] = 1 / mass
+    np.testing.assert_allclose(inv, want, rtol=1e-7, atol=1e-12)
+
+
 def test_unsupported_greybox_is_named(tmp_path):
     from cdam_core.models.file import save_model
     from cdam_core.models.greybox.augmented import GreyBox
     from cdam_core.models.greybox.registry import get_model
-    m = get_model("quadrotor")
+    m = get_model("aerial_manipulator")
     names = list(m.parameter_names)
+    values = [0.1 if n == "p2" else 1.0 for n in names]
     g = GreyBox.from_dict({
-        "declared": "quadrotor", "dt": 0.01, "n_inputs": len(m.inputs),
+        "declared": "aerial_manipulator", "dt": 0.01, "n_inputs": len(m.inputs),
         "n_outputs": len(m.positions), "fixed": {}, "extra_columns": [],
         "filter": {"cutoff_hz": 2.0, "order": 4}, "effects": [],
-        "parameters": {"names": names, "values": [1.0] * len(names),
+        "parameters": {"names": names, "values": values,
                        "std": [None] * len(names), "estimated": names}, "substeps": 1})
-    save_model(tmp_path / "quad.json", g)
-    with pytest.raises(ValueError, match="quadrotor.*cannot run on the firmware"):
-        fw.load_firmware_model(tmp_path / "quad.json")
-    assert main(["export-firmware", str(tmp_path / "quad.json"), "-o",
+    save_model(tmp_path / "am.json", g)
+    with pytest.raises(ValueError, match="aerial_manipulator.*cannot run on the firmware"):
+        fw.load_firmware_model(tmp_path / "am.json")
+    assert main(["export-firmware", str(tmp_path / "am.json"), "-o",
                  str(tmp_path / "m.hpp")]) == 2
     assert not (tmp_path / "m.hpp").exists()
 

@@ -21,7 +21,7 @@ from cdam_core.models.file import load_model
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _kinds import (RIGID, arx_file, arx_twin32, flexible_file, greybox_file,  # noqa: E402
-                    hybrid_file, rigid_record, rigid_twin32)
+                    hybrid_file, quadrotor_file, rigid_record, rigid_twin32)
 
 pytestmark = [pytest.mark.slow,
               pytest.mark.skipif(fw.toolchain_available() is not None,
@@ -132,8 +132,16 @@ def test_flexible_joint_with_every_effect_matches_python(tmp_path):
     res = fw.check(path, build_dir=tmp_path / "b", record=(U, Y))
     print("flexible", res)
     # sin and tanh of newlib (float) against numpy's (double): rounding level
-    assert res["max_abs_error"] <= 1e-5 * res["output_span"]
-    assert res["max_abs_error_free_run"] <= 1e-4 * res["output_span"]
+    assert res["max_rel_error"] <= 1e-5 and res["max_rel_error_free_run"] <= 1e-4
+    assert res["heap_free"] and res["instructions_per_step"] <= STEP_BUDGET
+
+
+def test_quadrotor_with_flight_effects_matches_python(tmp_path):
+    path = quadrotor_file(tmp_path / "q.json")
+    res = fw.check(path, build_dir=tmp_path / "b")      # the default synthetic record
+    print("quadrotor", res)
+    # each output (angles and positions) against its own span
+    assert res["max_rel_error"] <= 1e-5 and res["max_rel_error_free_run"] <= 1e-4
     assert res["heap_free"] and res["instructions_per_step"] <= STEP_BUDGET
 
 
@@ -155,7 +163,7 @@ def test_simulated_arm_found_effect(tmp_path):
     Y = np.column_stack([ds.column(c) for c in doc["outputs"]])[:n]
     res = fw.check(model, build_dir=tmp_path / "b", record=(U, Y))
     print("simulated arm", res)
-    assert res["max_abs_error"] <= 1e-5 * res["output_span"]
+    assert res["max_rel_error"] <= 1e-5
     assert res["heap_free"] and res["instructions_per_step"] <= STEP_BUDGET
 
 
@@ -168,7 +176,8 @@ def test_cli_check_reports_every_figure(greybox, tmp_path):
     rep = json.loads(out.read_text())
     assert rep["kind"] == "greybox" and rep["heap_free"] is True
     assert {"flash_bytes", "static_ram_bytes", "instructions_per_step", "microseconds_168mhz",
-            "max_abs_error", "max_abs_error_free_run", "output_span"} <= rep.keys()
+            "max_abs_error", "max_abs_error_free_run", "output_span", "max_rel_error",
+            "max_rel_error_free_run"} <= rep.keys()
     assert rep["max_abs_error"] <= 1e-5 * rep["output_span"]
     assert rep["microseconds_168mhz"] == pytest.approx(rep["instructions_per_step"] / 168, abs=0.01)
     assert "load" not in json.dumps(rep)    # no name from the file in the report either

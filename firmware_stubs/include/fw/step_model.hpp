@@ -156,7 +156,7 @@ inline std::uint32_t params_fnv1a() {
 // step to row t; a measured row sets x = y(t) and v = (y(t) - y(t-1)) / dt.
 namespace effect {   // codes written by the exporter (cdam_core.firmware.step.EFFECT_CODES)
 constexpr int kCoulomb = 1, kAsymmetric = 2, kExternalForce = 3, kDelay = 4, kBacklash = 5,
-              kHardening = 6, kPayload = 7;
+              kHardening = 6, kPayload = 7, kGroundEffect = 8, kThrustLoss = 9;
 }
 
 class StepModel {
@@ -261,6 +261,32 @@ class StepModel {
     e[1] = e[1] - th[6] * std::sin(x_[1]);
     e[1] = e[1] - th[2] * -d;
     e[1] = e[1] - th[3] * -dd;
+#elif CDAM_MODEL_DECLARED == 2
+    // quadrotor [m, Kx, Ky, Kz, Jx, Jy, Jz, Kphi, Ktheta, Kpsi], positions (phi, theta, psi,
+    // X, Y, Z), inputs (T, tau_phi, tau_theta, tau_psi); flight.Quadrotor.equations
+    const float pd = v_[0], td = v_[1], yd = v_[2];
+    const float tz = vertical_thrust(u);
+    float ux, uy;
+    thrust_xy(&ux, &uy);
+    e[0] = u[0] * ux;
+    e[0] = e[0] - th[1] * v_[3];
+    e[1] = u[0] * uy;
+    e[1] = e[1] - th[2] * v_[4];
+    e[2] = tz;
+    e[2] = e[2] - th[0] * (0.0f + kG0);
+    e[2] = e[2] - th[3] * v_[5];
+    e[3] = u[1];
+    e[3] = e[3] - th[5] * (-td * yd);
+    e[3] = e[3] - th[6] * (td * yd);
+    e[3] = e[3] - th[7] * pd;
+    e[4] = u[2];
+    e[4] = e[4] - th[6] * (-pd * yd);
+    e[4] = e[4] - th[4] * (pd * yd);
+    e[4] = e[4] - th[8] * td;
+    e[5] = u[3];
+    e[5] = e[5] - th[4] * (-pd * td);
+    e[5] = e[5] - th[5] * (pd * td);
+    e[5] = e[5] - th[9] * yd;
 #else
 #error "declared model not supported on the firmware"
 #endif
@@ -295,11 +321,41 @@ class StepModel {
           r = r - p[0] * (0.0f + p[1] * std::sin(x_[1]));
           break;
 #endif
+#if CDAM_MODEL_DECLARED == 2
+        case effect::kPayload:   // mass (Z'' + g) on Z, Z'' = 0
+          r = r - p[0] * (0.0f + kG0);
+          break;
+        case effect::kGroundEffect: {   // k (-T cphi ctheta (R / 4 max(Z, 0.05))^2)
+          const float z = x_[5] > 0.05f ? x_[5] : 0.05f;
+          const float q = p[1] / (4.0f * z);
+          r = r - p[0] * (-tz * (q * q));
+          break;
+        }
+        case effect::kThrustLoss:   // c (T cphi ctheta t), t from the record's first row
+          r = r - p[0] * (tz * (static_cast<float>(rows_ - 1) * cdam_model::kDt));
+          break;
+#endif
         default:   // delays and backlash act on the inputs and the deflection, not here
           break;
       }
     }
   }
+
+#if CDAM_MODEL_DECLARED == 2
+  static constexpr float kG0 = 9.81f;   // cdam_core.models.greybox.flight.G0
+  // T times the world z component of the body z axis (Z-Y-X Euler angles): T cphi ctheta
+  float vertical_thrust(const float* u) const {
+    return u[0] * (std::cos(x_[0]) * std::cos(x_[1]));
+  }
+  // world x and y components: cphi stheta cpsi + sphi spsi, cphi stheta spsi - sphi cpsi
+  void thrust_xy(float* ux, float* uy) const {
+    const float cf = std::cos(x_[0]), sf = std::sin(x_[0]);
+    const float st = std::sin(x_[1]);
+    const float cp = std::cos(x_[2]), sp = std::sin(x_[2]);
+    *ux = cf * st * cp + sf * sp;
+    *uy = cf * st * sp - sf * cp;
+  }
+#endif
 
 #if CDAM_MODEL_DECLARED == 1
   // sign(d) max(|d| - width / 2, 0) when the model has a backlash (Backlash.transform_state)

@@ -25,6 +25,12 @@ def _input_range(fm: StepFirmwareModel):
     """(lo, hi) per input of the synthetic record, from the model's own numbers."""
     i, a = fm.ints, fm.arrays
     n = fm.n_inputs
+    if fm.kind == "greybox" and fm.macros["CDAM_MODEL_DECLARED"] == 2:
+        # quadrotor: thrust within 10 % of the hover thrust m g, torques giving about 1 rad/s^2
+        b = np.asarray(a["kBase"], np.float64)
+        hi = np.r_[1.1 * b[0] * 9.81, b[4:7], np.ones(n - 4)]
+        lo = np.r_[0.9 * b[0] * 9.81, -b[4:7], -np.ones(n - 4)]
+        return lo, hi
     if fm.kind == "greybox":
         # a force beyond the static ones (offset or gravity, dry friction, a payload's weight),
         # so that the axis moves both ways
@@ -128,6 +134,8 @@ def _step_report(fm: StepFirmwareModel, sizes: dict, runs: dict, heap_free: bool
         "max_abs_error": one["max_abs_error"],
         "max_abs_error_free_run": free["max_abs_error"],
         "output_span": one["output_span"],
+        "max_rel_error": one["max_rel_error"],
+        "max_rel_error_free_run": free["max_rel_error"],
         "steps": one["steps"],
         "stack_bytes": max(one["stack_bytes"], free["stack_bytes"]),
         "check_image": sizes["fw_step_check"],

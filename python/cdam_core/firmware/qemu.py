@@ -91,7 +91,8 @@ def run_step_equivalence(build_dir, model, U, Y, mode: str = "one_step", *,
     t0 measured rows only) and is compared with the Python model (float64) on the same
     float32-rounded record.
 
-    Returns max_abs_error (over rows t0.. and outputs), output_span (max - min of Y),
+    Returns max_abs_error (over rows t0.. and outputs), output_span (the largest max - min of
+    an output of Y), max_rel_error (the largest of each output's error over its span),
     instructions_per_step (mean) and instructions_per_step_max, stack_bytes, steps, sandbox
     and the firmware's predictions ``outputs`` (N - t0, m) float32.
     """
@@ -129,10 +130,14 @@ def run_step_equivalence(build_dir, model, U, Y, mode: str = "one_step", *,
     tpi = int(kv["cal_ticks"]) / int(kv["cal_instructions"])
     total = (int(kv["step_ticks_hi"]) << 32) + int(kv["step_ticks_lo"])
     empty = int(kv["empty_ticks"])
+    err = np.max(np.abs(P.astype(np.float64) - want), axis=0)
+    span = np.ptp(Y32.astype(np.float64), axis=0)
     return {
         "mode": mode,
-        "max_abs_error": float(np.max(np.abs(P.astype(np.float64) - want))),
-        "output_span": float(np.max(np.ptp(Y32.astype(np.float64), axis=0))),
+        "max_abs_error": float(np.max(err)),
+        "output_span": float(np.max(span)),
+        "max_rel_error": float(np.max(np.where(span > 0, err / np.where(span > 0, span, 1),
+                                               np.where(err > 0, np.inf, 0.0)))),
         "instructions_per_step": round((total - empty * steps) / steps / tpi, 1),
         "instructions_per_step_max": round((int(kv["step_ticks_max"]) - empty) / tpi, 1),
         "stack_bytes": int(kv["stack_bytes"]),

@@ -21,10 +21,11 @@ import numpy as np
 from cdam_core.firmware.numbers import c_array, c_float, c_int_array, finite32, theta_fnv1a
 
 KIND_CODES = {"bp_network": 0, "arx": 1, "hybrid": 2, "greybox": 3}
-DECLARED_CODES = {"rigid_axis": 0, "flexible_joint": 1}
+DECLARED_CODES = {"rigid_axis": 0, "flexible_joint": 1, "quadrotor": 2}
 EFFECT_CODES = {"coulomb_friction": 1, "asymmetric_friction": 2, "external_force": 3,
-                "actuator_delay": 4, "backlash": 5, "hardening_stiffness": 6, "payload_mass": 7}
-G0 = 9.81   # cdam_core.models.greybox.effects.G0 (payload_mass), checked by a test
+                "actuator_delay": 4, "backlash": 5, "hardening_stiffness": 6, "payload_mass": 7,
+                "ground_effect": 8, "thrust_loss": 9}
+G0 = 9.81   # cdam_core.models.greybox.effects.G0 and flight.G0 (the firmware's kG0), tested
 MAX_DELAY_ROWS = 4096      # input history the firmware keeps for an actuator delay
 MAX_COEFS = 100_000        # ARX rows x outputs, network weights (above the M4F's flash)
 MAX_SUBSTEPS = 1000        # grey-box substeps per sample on the target
@@ -186,8 +187,14 @@ def _greybox(mf) -> StepFirmwareModel:
             rows = [(0, 0, [0.5 * float(e.width), 0.0, 0.0, 0.0])]
         elif e.name == "hardening_stiffness":
             rows = [(0, 0, [th[f"{key}.K3"], 0.0, 0.0, 0.0])]
-        elif e.name == "payload_mass":
+        elif e.name == "payload_mass" and g.declared == "flexible_joint":
             rows = [(0, 0, [th[f"{key}.m"], G0 * float(e.length), 0.0, 0.0])]
+        elif e.name == "payload_mass":     # the flight models: a mass on Z
+            rows = [(0, 0, [th[f"{key}.mass"], 0.0, 0.0, 0.0])]
+        elif e.name == "ground_effect":
+            rows = [(0, 0, [th[f"{key}.k"], float(e.rotor_radius), 0.0, 0.0])]
+        elif e.name == "thrust_loss":
+            rows = [(0, 0, [th[f"{key}.c"], 0.0, 0.0, 0.0])]
         else:   # actuator_delay: u(t - delay) by linear interpolation between two rows
             if float(e.delay) <= 0.0:
                 continue                        # Python leaves the inputs as they are
