@@ -4,6 +4,7 @@ import os
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import cdam_core
@@ -77,3 +78,21 @@ def test_missing_eigen_is_named(monkeypatch, tmp_path):
         assert ("Eigen 3 headers", "libeigen3-dev") in paths.missing_tools()
     finally:
         paths._missing_tools.cache_clear()
+
+
+def test_cli_check_data_is_checked_before_building(monkeypatch, tmp_path, capsys):
+    from _kinds import greybox_file
+    from cdam_core.record.dataset import Dataset, write_dataset
+    model = greybox_file(tmp_path / "gb.json", inputs=("tau", "load"))
+    _empty_path(monkeypatch, tmp_path)           # no toolchain: the record is refused first
+    rec = tmp_path / "rec.csv"
+    t = np.arange(50) * 0.002                    # the model integrates at 1 ms
+    write_dataset(rec, Dataset(t, ["tau", "load", "q"], np.zeros((50, 3))))
+    assert main(["firmware", "check", str(model), "--data", str(rec)]) == 2
+    assert "0.002 s" in capsys.readouterr().err
+    write_dataset(rec, Dataset(t / 2, ["tau", "q"], np.zeros((50, 2))))
+    assert main(["firmware", "check", str(model), "--data", str(rec)]) == 2
+    assert "load" in capsys.readouterr().err      # the missing column, named
+    net = fw.FIRMWARE_DIR / "generated" / "demo_model.json"
+    assert main(["firmware", "check", str(net), "--data", str(rec)]) == 2
+    assert "bp_network" in capsys.readouterr().err
