@@ -245,3 +245,15 @@ def test_default_record_moves_the_model(tmp_path):
     U, Y = fw.default_record(fm, n=400)
     assert U.shape == (400, 2) and Y.shape == (400, 1) and np.all(np.isfinite(Y))
     assert np.ptp(Y) > 0 and len(np.unique(U[:, 0])) > 10
+
+
+def test_a_delay_beyond_the_firmware_buffer_is_refused(tmp_path):
+    from cdam_core.firmware.step import MAX_DELAY_ROWS
+    from cdam_core.models.file import load_model, save_model
+    g = load_model(greybox_file(tmp_path / "gb.json"))
+    e = g.effects[-1]
+    assert e.name == "actuator_delay"
+    g.effects = g.effects[:-1] + (e.with_value((MAX_DELAY_ROWS + 1) * RIGID["dt"]),)
+    save_model(tmp_path / "long.json", g, inputs=["tau", "load"], outputs=["q"])
+    with pytest.raises(ValueError, match=f"delay: {MAX_DELAY_ROWS + 1} samples exceed"):
+        fw.load_firmware_model(tmp_path / "long.json")

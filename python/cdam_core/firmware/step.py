@@ -26,7 +26,7 @@ EFFECT_CODES = {"coulomb_friction": 1, "asymmetric_friction": 2, "external_force
                 "actuator_delay": 4, "backlash": 5, "hardening_stiffness": 6, "payload_mass": 7,
                 "ground_effect": 8, "thrust_loss": 9}
 G0 = 9.81   # cdam_core.models.greybox.effects.G0 and flight.G0 (the firmware's kG0), tested
-MAX_DELAY_ROWS = 4096      # input history the firmware keeps for an actuator delay
+MAX_DELAY_ROWS = 1024      # input rows kept for an actuator delay (4 KB of RAM per input)
 MAX_COEFS = 100_000        # ARX rows x outputs, network weights (above the M4F's flash)
 MAX_SUBSTEPS = 1000        # grey-box substeps per sample on the target
 
