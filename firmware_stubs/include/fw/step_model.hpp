@@ -209,30 +209,38 @@ class StepModel {
     }
   }
 
-  // raw input history, newest first; before the record's first row it holds that row
-  // (np.interp holds the first value before the start)
+  // raw input history: a ring of kRing rows, `head_` the newest; before the record's first
+  // row it holds that row (np.interp holds the first value before the start). rows_ counts the
+  // rows pushed and stops at 2^31 - 1 (24 days at 1 kHz; no signed overflow).
   void push_input(const float* u) {
     if (rows_ == 0)
       for (int j = 0; j < kRing; ++j)
         for (int c = 0; c < kU; ++c) u_[j][c] = u[c];
-    for (int j = kRing - 1; j > 0; --j)
-      for (int c = 0; c < kU; ++c) u_[j][c] = u_[j - 1][c];
-    for (int c = 0; c < kU; ++c) u_[0][c] = u[c];
-    ++rows_;
+    head_ = head_ + 1 < kRing ? head_ + 1 : 0;
+    for (int c = 0; c < kU; ++c) u_[head_][c] = u[c];
+    if (rows_ < 0x7FFFFFFF) ++rows_;
+  }
+
+  // the input row `back` rows before the newest (0 <= back < kRing)
+  const float* input(int back) const {
+    const int k = head_ - back;
+    return u_[k < 0 ? k + kRing : k];
   }
 
   // u(t - 1) with every delay applied: u(t-1-delay) = u[k-L] + frac (u[k-L+1] - u[k-L]) as
   // np.interp: slope (fp[j+1] - fp[j]) / (xp[j+1] - xp[j]) times (x - xp[j]), plus fp[j]
   void effective_input(float* ue) const {
-    for (int c = 0; c < kU; ++c) ue[c] = u_[0][c];
+    const float* now = input(0);
+    for (int c = 0; c < kU; ++c) ue[c] = now[c];
     for (int k = 0; k < kE; ++k) {
       if (cdam_model::kEffectCode[k] != effect::kDelay) continue;
       const int c = cdam_model::kEffectIndex[k];
       const int lag = cdam_model::kEffectLag[k];
       const float* p = &cdam_model::kEffectParam[k * 4];
-      const float lo = u_[lag][c], hi = u_[lag > 0 ? lag - 1 : 0][c];
-      // before the record's start np.interp returns its first value
-      ue[c] = rows_ - 1 < lag ? u_[kRing - 1][c] : (hi - lo) / p[1] * p[0] + lo;
+      const float lo = input(lag)[c], hi = input(lag > 0 ? lag - 1 : 0)[c];
+      // before the record's start np.interp returns its first value (lo and hi hold it there:
+      // the ring starts filled with the first row)
+      ue[c] = rows_ - 1 < lag ? lo : (hi - lo) / p[1] * p[0] + lo;
     }
   }
 
@@ -373,6 +381,7 @@ class StepModel {
 
   float x_[kN] = {}, v_[kN] = {}, xlast_[kN] = {}, xprev_[kN] = {};
   float u_[kRing][kU] = {};
+  int head_ = 0;
   int rows_ = 0;
 };
 
