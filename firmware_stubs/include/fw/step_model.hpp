@@ -157,7 +157,13 @@ inline std::uint32_t params_fnv1a() {
 namespace effect {   // codes written by the exporter (cdam_core.firmware.step.EFFECT_CODES)
 constexpr int kCoulomb = 1, kAsymmetric = 2, kExternalForce = 3, kDelay = 4, kBacklash = 5,
               kHardening = 6, kPayload = 7, kGroundEffect = 8, kThrustLoss = 9;
+
+constexpr bool present(int code) {
+  for (int k = 0; k < cdam_model::kEffects; ++k)
+    if (cdam_model::kEffectCode[k] == code) return true;
+  return false;
 }
+}  // namespace effect
 
 class StepModel {
  public:
@@ -213,16 +219,23 @@ class StepModel {
   // row it holds that row (np.interp holds the first value before the start). rows_ counts the
   // rows pushed and stops at 2^31 - 1 (24 days at 1 kHz; no signed overflow).
   void push_input(const float* u) {
-    if (rows_ == 0)
-      for (int j = 0; j < kRing; ++j)
-        for (int c = 0; c < kU; ++c) u_[j][c] = u[c];
-    head_ = head_ + 1 < kRing ? head_ + 1 : 0;
+    if constexpr (kRing > 1) {
+      if (rows_ == 0)
+        for (int j = 0; j < kRing; ++j)
+          for (int c = 0; c < kU; ++c) u_[j][c] = u[c];
+      head_ = head_ + 1 < kRing ? head_ + 1 : 0;
+    }
     for (int c = 0; c < kU; ++c) u_[head_][c] = u[c];
-    if (rows_ < 0x7FFFFFFF) ++rows_;
+    if (kCountRows && rows_ < 0x7FFFFFFF) ++rows_;
   }
+
+  // the row count matters to the delays (the record's start) and the thrust loss (time)
+  static constexpr bool kCountRows = kRing > 1 || effect::present(effect::kThrustLoss);
+
 
   // the input row `back` rows before the newest (0 <= back < kRing)
   const float* input(int back) const {
+    if constexpr (kRing == 1) return u_[0];   // no delay: the newest row only
     const int k = head_ - back;
     return u_[k < 0 ? k + kRing : k];
   }
