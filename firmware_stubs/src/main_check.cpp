@@ -10,6 +10,7 @@
 #include "fw/hal.hpp"
 #include "fw/model_runner.hpp"
 #include "fw/semihost.hpp"
+#include "fw/ticks.hpp"
 
 namespace sh = fw::semihost;
 
@@ -18,19 +19,9 @@ extern "C" std::uint32_t fw_stack_high_water();
 
 namespace {
 
-constexpr std::uint32_t kCalIterations = 20000;  // 2 instructions each (subs, bne)
 constexpr std::uint32_t kReps = 500;
 
-inline std::uint32_t elapsed(std::uint32_t start, std::uint32_t end) {
-  return (start - end) & 0x00FFFFFFu;  // SysTick counts down
-}
-
-std::uint32_t ticks_calibration() {
-  const std::uint32_t t0 = fw::hal::systick_value();
-  std::uint32_t n = kCalIterations;
-  __asm__ volatile("1: subs %0, %0, #1\n bne 1b" : "+r"(n)::"cc");
-  return elapsed(t0, fw::hal::systick_value());
-}
+using fw::ticks::elapsed;
 
 float g_x[fw::kIn], g_y[fw::kOut];
 
@@ -75,8 +66,8 @@ int main() {
 
   for (int k = 0; k < fw::kIn; ++k) g_x[k] = 0.1f * static_cast<float>(k) - 0.3f;
   fw::hal::systick_free_running();
-  sh::kv("cal_instructions", 2 * kCalIterations + 1);
-  sh::kv("cal_ticks", ticks_calibration());
+  sh::kv("cal_instructions", fw::ticks::kCalInstructions);
+  sh::kv("cal_ticks", fw::ticks::calibration());
   sh::kv("reps", kReps);
   sh::kv("empty_ticks", ticks_loop(false, false));
   sh::kv("infer_ticks", ticks_loop(true, false));

@@ -6,6 +6,7 @@ import shutil
 from pathlib import Path
 
 from cdam_core.firmware.export import export_header
+from cdam_core.firmware.model import FirmwareModel, StepFirmwareModel, load_firmware_model
 from cdam_core.firmware.paths import FIRMWARE_DIR, _run, toolchain_available
 
 
@@ -18,15 +19,20 @@ def _sizes(elf: Path) -> dict:
 IMAGES = ("fw_infer", "fw_check", "fw_loop", "fw_kernels", "fw_optim", "fw_check_exact")
 
 
+STEP_IMAGES = ("fw_step", "fw_step_check")   # the dynamic kinds (arx, hybrid, greybox)
+
+
 def build(build_dir, model=None, *, jobs: int = 2, timeout: float = 600.0) -> dict:
     """Cross-build the firmware images into ``build_dir``.
 
     Args:
         build_dir: CMake build folder (created).
-        model: a model file, a FirmwareModel, or None for the checked-in generated/model.hpp.
-    Returns ``{image: {"text", "data", "bss"}}`` for fw_infer, fw_check, fw_loop, fw_kernels,
-    fw_optim (check 3's IBOA-BP run) and fw_check_exact (fw_check with std::tanh, the
-    benchmark's reference).
+        model: a model file, a FirmwareModel, a StepFirmwareModel, or None for the checked-in
+            generated/model.hpp.
+    Returns ``{image: {"text", "data", "bss"}}``: for a network fw_infer, fw_check, fw_loop,
+    fw_kernels, fw_optim (check 3's IBOA-BP run) and fw_check_exact (fw_check with std::tanh,
+    the benchmark's reference); for arx, hybrid and greybox (:data:`STEP_IMAGES`) fw_step
+    (model + one step) and fw_step_check.
     Raises RuntimeError with the compiler output when the build fails (also when something
     uses the heap: the link then fails on ``__wrap_malloc``).
     """
@@ -36,6 +42,9 @@ def build(build_dir, model=None, *, jobs: int = 2, timeout: float = 600.0) -> di
     build_dir = Path(build_dir).resolve()
     build_dir.mkdir(parents=True, exist_ok=True)
     model_dir = FIRMWARE_DIR / "generated"
+    if model is not None and not isinstance(model, (FirmwareModel, StepFirmwareModel)):
+        model = load_firmware_model(model)
+    images = STEP_IMAGES if isinstance(model, StepFirmwareModel) else IMAGES
     if model is not None:
         model_dir = build_dir / "generated"
         model_dir.mkdir(exist_ok=True)
@@ -56,7 +65,7 @@ def build(build_dir, model=None, *, jobs: int = 2, timeout: float = 600.0) -> di
         if r.returncode != 0:
             raise RuntimeError(f"firmware build failed ({' '.join(cmd[:2])}):\n"
                                f"{r.stdout[-4000:]}\n{r.stderr[-4000:]}")
-    return {name: _sizes(build_dir / f"{name}.elf") for name in IMAGES}
+    return {name: _sizes(build_dir / f"{name}.elf") for name in images}
 
 
 def heap_guard_works(build_dir, timeout: float = 120.0) -> bool:

@@ -9,8 +9,11 @@ import numpy as np
 from cdam_core.base.rng import Rng
 
 from cdam_core.firmware.build import build, heap_guard_works
-from cdam_core.firmware.model import FirmwareModel, load_firmware_model
-from cdam_core.firmware.qemu import run_equivalence
+from cdam_core.firmware.model import FirmwareModel, StepFirmwareModel, load_firmware_model
+from cdam_core.firmware.qemu import run_equivalence, run_step_equivalence
+
+CLOCK_HZ = 168e6   # the STM32F405's core clock: microseconds = instructions / 168 (one per cycle)
+HOLD_ROWS = 20     # the synthetic record's input holds each random level this many rows
 
 
 def default_inputs(fm: FirmwareModel, n: int = 1000, seed: int = 0) -> np.ndarray:
@@ -18,39 +21,124 @@ def default_inputs(fm: FirmwareModel, n: int = 1000, seed: int = 0) -> np.ndarra
     return Rng(seed).uniform_array(n * fm.n_inputs, -1.0, 1.0).reshape(n, fm.n_inputs)
 
 
-def check(model_path, *, build_dir=None, inputs=None, timeout: float = 60.0) -> dict:
-    """``cdam firmware check``: build for the model, run checks (1) and (2) under QEMU.
+def _input_range(fm: StepFirmwareModel):
+    """(lo, hi) per input of the synthetic record, from the model's own numbers."""
+    i, a = fm.ints, fm.arrays
+    n = fm.n_inputs
+    if fm.kind == "greybox" and fm.macros["CDAM_MODEL_DECLARED"] == 2:
+        # quadrotor: thrust within 10 % of the hover thrust m g, torques giving about 1 rad/s^2
+        b = np.asarray(a["kBase"], np.float64)
+        hi = np.r_[1.1 * b[0] * 9.81, b[4:7], np.ones(n - 4)]
+        lo = np.r_[0.9 * b[0] * 9.81, -b[4:7], -np.ones(n - 4)]
+        return lo, hi
+    if fm.kind == "greybox":
+        # a force beyond the static ones (offset or gravity, dry friction, a payload's weight),
+        # so that the axis moves both ways
+        par = np.asarray(a["kEffectParam"], np.float64).reshape(-1, 4)
+        code = np.asarray(fm.int_arrays["kEffectCode"])[:len(par)]
+        static = abs(a["kBase"][2] if fm.macros["CDAM_MODEL_DECLARED"] == 0 else a["kBase"][6])
+        static += np.sum(np.abs(par[code == 1, 0])) + np.sum(np.abs(par[code == 7, 0] *
+                                                                    par[code == 7, 1]))
+        amp = 4.0 * static + 1.0
+        return np.full(n, -amp), np.full(n, amp)
+    if i["kPhysics"]:   # motor commands, 0 .. their training maximum
+        return np.zeros(n), np.asarray(a["kFeatureScale"], np.float64)
+    if "kNetXMin" in a:   # raw inputs: the residual network's training range of lag 0
+        return np.asarray(a["kNetXMin"][:n]), np.asarray(a["kNetXMax"][:n])
+    return -np.ones(n), np.ones(n)
+
+
+def default_record(fm: StepFirmwareModel, n: int = 1000, seed: int = 0):
+    """A synthetic record for a dynamic model: inputs that hold a uniform random level (shared
+    generator, ``seed``) for HOLD_ROWS rows, in the range :func:`_input_range` gives; outputs:
+    the Python model's free run from zero (so one-step and free run see the model's own
+    trajectory). Returns (U (n, I), Y (n, m)) float64."""
+    lo, hi = _input_range(fm)
+    levels = Rng(seed).uniform_array((n // HOLD_ROWS + 1) * fm.n_inputs, 0.0, 1.0)
+    levels = levels.reshape(-1, fm.n_inputs)
+    U = np.repeat(lo + (hi - lo) * levels, HOLD_ROWS, axis=0)[:n]
+    Y = np.zeros((n, fm.n_outputs))
+    Y[fm.history:] = fm.predict(U, Y, "free_run")
+    return U, Y
+
+
+def check(model_path, *, build_dir=None, inputs=None, record=None, timeout: float = 60.0) -> dict:
+    """``cdam firmware check``: build for the model, run it under QEMU, compare with Python.
 
     Args:
-        model_path: the model file.
+        model_path: the model file (any kind).
         build_dir: where to build (default: a temporary folder).
-        inputs: (N, I) normalised network inputs (default: 1000 uniform vectors, seed 0).
-    Returns {"text", "data", "bss" (of the loop image fw_loop.elf), "heap_free",
-    "instructions_per_inference", "max_abs_error", ...} with the model-plus-inference image's
-    sizes and the stack high-water mark too.
+        inputs: bp_network: (N, I) normalised network inputs (default: 1000 uniform vectors,
+            seed 0).
+        record: arx, hybrid, greybox: (U, Y) in physical units (default:
+            :func:`default_record`).
+    Returns a dict with "kind", "flash_bytes" (text + data) and "static_ram_bytes" (data +
+    bss) of the smallest image holding the model (fw_infer / fw_step), "heap_free", the
+    instructions per inference or step, "microseconds_168mhz" (instructions / 168: one
+    instruction a cycle, a lower bound), "max_abs_error" (one-step for the dynamic kinds; their
+    free run in "max_abs_error_free_run"), and more per kind (see the README).
     """
     fm = load_firmware_model(model_path)
-    X = default_inputs(fm) if inputs is None else np.asarray(inputs, dtype=np.float64)
     ctx = tempfile.TemporaryDirectory(prefix="cdam_fw_build_") if build_dir is None else None
     bdir = Path(ctx.name if ctx else build_dir)
     try:
         sizes = build(bdir, fm)
-        eq = run_equivalence(bdir, fm, X, timeout=timeout)
+        if isinstance(fm, StepFirmwareModel):
+            U, Y = default_record(fm) if record is None else record
+            runs = {mode: run_step_equivalence(bdir, fm, U, Y, mode, timeout=timeout)
+                    for mode in ("one_step", "free_run")}
+        else:
+            X = default_inputs(fm) if inputs is None else np.asarray(inputs, dtype=np.float64)
+            eq = run_equivalence(bdir, fm, X, timeout=timeout)
         heap_free = heap_guard_works(bdir)
     finally:
         if ctx:
             ctx.cleanup()
+    if isinstance(fm, StepFirmwareModel):
+        return _step_report(fm, sizes, runs, heap_free)
     loop, infer = sizes["fw_loop"], sizes["fw_infer"]
     return {
+        "kind": "bp_network",
         "text": loop["text"], "data": loop["data"], "bss": loop["bss"],
+        "flash_bytes": infer["text"] + infer["data"],
+        "static_ram_bytes": infer["data"] + infer["bss"],
         "heap_free": bool(heap_free),
         "instructions_per_inference": eq["instructions_per_inference"],
         "max_abs_error": eq["max_abs_error"],
         "instructions_per_prediction": eq["instructions_per_prediction"],
+        "microseconds_168mhz": round(eq["instructions_per_prediction"] / (CLOCK_HZ / 1e6), 2),
         "inference_image": infer,
         "stack_bytes": eq["stack_bytes"],
         "vectors": eq["vectors"],
         "model_sha256": fm.sha256,
         "network": f"{fm.n_inputs}-{fm.hidden}-{fm.n_outputs}",
         "sandbox": eq["sandbox"],
+    }
+
+
+def _step_report(fm: StepFirmwareModel, sizes: dict, runs: dict, heap_free: bool) -> dict:
+    img = sizes["fw_step"]
+    one, free = runs["one_step"], runs["free_run"]
+    ips = max(one["instructions_per_step"], free["instructions_per_step"])
+    return {
+        "kind": fm.kind,
+        "model": fm.describe(),
+        "text": img["text"], "data": img["data"], "bss": img["bss"],
+        "flash_bytes": img["text"] + img["data"],
+        "static_ram_bytes": img["data"] + img["bss"],
+        "heap_free": bool(heap_free),
+        "instructions_per_step": ips,
+        "instructions_per_step_max": max(one["instructions_per_step_max"],
+                                         free["instructions_per_step_max"]),
+        "microseconds_168mhz": round(ips / (CLOCK_HZ / 1e6), 2),
+        "max_abs_error": one["max_abs_error"],
+        "max_abs_error_free_run": free["max_abs_error"],
+        "output_span": one["output_span"],
+        "max_rel_error": one["max_rel_error"],
+        "max_rel_error_free_run": free["max_rel_error"],
+        "steps": one["steps"],
+        "stack_bytes": max(one["stack_bytes"], free["stack_bytes"]),
+        "check_image": sizes["fw_step_check"],
+        "model_sha256": fm.sha256,
+        "sandbox": one["sandbox"],
     }

@@ -1,4 +1,6 @@
-"""The model as the firmware runs it (a BP network in its input space), read from a model file."""
+"""The model as the firmware runs it, read from a model file: a BP network in its input space
+(:class:`FirmwareModel`), or a dynamic kind, arx / hybrid / greybox
+(:class:`cdam_core.firmware.step.StepFirmwareModel`)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -7,7 +9,11 @@ from pathlib import Path
 import numpy as np
 
 from cdam_core import _core
+from cdam_core.firmware.numbers import theta_fnv1a
+from cdam_core.firmware.step import StepFirmwareModel, step_model
 from cdam_core.models.file import read_model_file
+
+__all__ = ["FirmwareModel", "StepFirmwareModel", "load_firmware_model", "theta_fnv1a"]
 
 
 @dataclass
@@ -57,19 +63,22 @@ def _minmax(X, lo, hi):
         return np.where(span > 0, 2 * (X - lo) / np.where(span > 0, span, 1) - 1, 0.0)
 
 
-def load_firmware_model(path) -> FirmwareModel:
-    """Read a model file into a FirmwareModel (kinds the firmware runs: ``bp_network``).
+def load_firmware_model(path) -> FirmwareModel | StepFirmwareModel:
+    """Read a model file into what the firmware runs: a FirmwareModel for ``bp_network``, a
+    StepFirmwareModel for ``arx``, ``hybrid`` and ``greybox``.
 
     Raises FileNotFoundError for a missing file and ValueError for a corrupt or inconsistent
-    one, or for a model kind the firmware cannot run yet.
+    one, or for a model (a grey-box model's declared model or effect) the firmware cannot run.
     """
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"MODEL: no such file: {path}")
     mf = read_model_file(path)
     if mf.kind != "bp_network":
-        raise ValueError(f"MODEL: {path}: a {mf.kind!r} model cannot run on the firmware yet "
-                         f"(it runs bp_network models)")
+        try:
+            return step_model(mf, str(path))
+        except ValueError as exc:
+            raise ValueError(f"{exc} ({path})") from None
     net = mf.model
     ins, outs, m = mf.inputs, mf.outputs, net.n_outputs_
     xmin, xmax = net.scaler_x_.data_min_, net.scaler_x_.data_max_
@@ -84,11 +93,3 @@ def load_firmware_model(path) -> FirmwareModel:
     return FirmwareModel(names, list(outs), int(net.hidden_), net.activation,
                          np.asarray(net.theta_, np.float64), xmin, xmax, ymin, ymax,
                          mf.sha256, net.narx, str(path))
-
-
-def theta_fnv1a(theta) -> int:
-    """FNV-1a (32 bit) of the little-endian float32 bytes of theta (the firmware checks it)."""
-    h = 0x811C9DC5
-    for b in np.asarray(theta, dtype="<f4").tobytes():
-        h = ((h ^ b) * 0x01000193) & 0xFFFFFFFF
-    return h

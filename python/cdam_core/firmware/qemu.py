@@ -7,7 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from cdam_core.firmware.model import FirmwareModel, load_firmware_model, theta_fnv1a
+from cdam_core.firmware.model import (FirmwareModel, StepFirmwareModel, load_firmware_model,
+                                      theta_fnv1a)
 from cdam_core.firmware import sandbox
 from cdam_core.firmware.paths import QEMU, _run
 
@@ -76,6 +77,73 @@ def run_equivalence(build_dir, model, X_normalised, *, timeout: float = 60.0,
         "sandbox": kv["sandbox"],
         "vectors": int(Y.shape[0]),
         "outputs": Y,
+    }
+
+
+MODES = {"one_step": 0, "free_run": 1}
+
+
+def run_step_equivalence(build_dir, model, U, Y, mode: str = "one_step", *,
+                         timeout: float = 60.0) -> dict:
+    """The dynamic kinds (arx, hybrid, greybox): fw_step_check.elf runs the record (U (N, I),
+    Y (N, m), physical units, rounded to float32) through ``fw::StepModel`` in ``mode``
+    ("one_step": every row's prediction from the measured history; "free_run": from the first
+    t0 measured rows only) and is compared with the Python model (float64) on the same
+    float32-rounded record.
+
+    Returns max_abs_error (over rows t0.. and outputs), output_span (the largest max - min of
+    an output of Y), max_rel_error (the largest of each output's error over its span),
+    instructions_per_step (mean) and instructions_per_step_max, stack_bytes, steps, sandbox
+    and the firmware's predictions ``outputs`` (N - t0, m) float32.
+    """
+    fm = model if isinstance(model, StepFirmwareModel) else load_firmware_model(model)
+    if not isinstance(fm, StepFirmwareModel):
+        raise ValueError("model: a bp_network model: use run_equivalence")
+    if mode not in MODES:
+        raise ValueError(f"mode: expected one of {', '.join(MODES)}, got {mode!r}")
+    U = np.asarray(U, dtype=np.float64)
+    Y = np.asarray(Y, dtype=np.float64)
+    for name, a, w in (("U", U, fm.n_inputs), ("Y", Y, fm.n_outputs)):
+        if a.ndim != 2 or a.shape[1] != w:
+            raise ValueError(f"{name}: expected shape (N, {w}), got {a.shape}")
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"{name}: contains NaN or Inf")
+    if U.shape[0] != Y.shape[0] or U.shape[0] <= fm.history:
+        raise ValueError(f"U, Y: need the same number of rows, more than {fm.history}; got "
+                         f"{U.shape[0]} and {Y.shape[0]}")
+    U32, Y32 = U.astype(np.float32), Y.astype(np.float32)
+    with tempfile.TemporaryDirectory(prefix="cdam_fw_") as tmp:
+        with open(Path(tmp) / "fw_step_in.bin", "wb") as f:
+            f.write(struct.pack("<ii", U.shape[0], MODES[mode]))
+            f.write(np.hstack([U32, Y32]).astype("<f4").tobytes())
+        rc, kv, text = run_qemu(Path(build_dir).resolve() / "fw_step_check.elf", tmp,
+                                timeout=timeout)
+        if rc != 0:
+            raise RuntimeError(f"fw_step_check.elf exited with {rc} under QEMU:\n{text[-2000:]}")
+        P = np.fromfile(Path(tmp) / "fw_step_out.bin", dtype="<f4").reshape(-1, fm.n_outputs)
+    steps = U.shape[0] - fm.history
+    if P.shape[0] != steps or int(kv["steps"]) != steps:
+        raise RuntimeError(f"firmware answered {P.shape[0]} of {steps} steps")
+    if int(kv["params_fnv1a"], 16) != fm.params_fnv1a():
+        raise RuntimeError("the firmware's parameters differ from the model's (FNV-1a mismatch)")
+    want = fm.predict(U32.astype(np.float64), Y32.astype(np.float64), mode)
+    tpi = int(kv["cal_ticks"]) / int(kv["cal_instructions"])
+    total = (int(kv["step_ticks_hi"]) << 32) + int(kv["step_ticks_lo"])
+    empty = int(kv["empty_ticks"])
+    err = np.max(np.abs(P.astype(np.float64) - want), axis=0)
+    span = np.ptp(Y32.astype(np.float64), axis=0)
+    return {
+        "mode": mode,
+        "max_abs_error": float(np.max(err)),
+        "output_span": float(np.max(span)),
+        "max_rel_error": float(np.max(np.where(span > 0, err / np.where(span > 0, span, 1),
+                                               np.where(err > 0, np.inf, 0.0)))),
+        "instructions_per_step": round((total - empty * steps) / steps / tpi, 1),
+        "instructions_per_step_max": round((int(kv["step_ticks_max"]) - empty) / tpi, 1),
+        "stack_bytes": int(kv["stack_bytes"]),
+        "sandbox": kv["sandbox"],
+        "steps": steps,
+        "outputs": P,
     }
 
 

@@ -1,0 +1,409 @@
+// The dynamic model kinds on the target, one sample at a time: `arx`, `hybrid` (ARX + a static
+// network on its residual) and `greybox` (a declared model plus the effects the residual loop
+// found, integrated as cdam_core.models.greybox.augmented.GreyBox does). The numbers come from
+// generated/model.hpp (`cdam export-firmware`); the structure (which effect, which declared
+// model) is an integer code there, never a name. Fixed sizes, no heap; libm only for tanhf (a
+// smoothed Coulomb friction) and sinf (the flexible joint's gravity and payload terms).
+//
+// One interface for every kind (rows t = 0, 1, ... of one record):
+//   prime(u, y)    rows 0 .. kHistory-1: a measured row (input u(t), output y(t)) as history;
+//   step(u, y)     rows t >= kHistory: the prediction of y(t) from the history and u(t), which
+//                  becomes the newest history row (free run);
+//   correct(y)     replace that newest row by the measured y(t) (one-step prediction: step then
+//                  correct on every row).
+// Arithmetic: float32 in the order of the Python model's float64 expressions (build the image
+// with -ffp-contract=off so that no multiply-add is fused), so the firmware differs from Python
+// by float32 rounding only.
+#pragma once
+#include <cstdint>
+
+#include "model.hpp"
+
+#if CDAM_MODEL_KIND == 2 && CDAM_MODEL_HAS_NET
+#include "cdam/fast_math.hpp"
+#include "cdam/mlp.hpp"
+#include "cdam/scaling.hpp"
+#endif
+#if CDAM_MODEL_KIND == 3
+#include <cmath>
+#endif
+
+namespace fw {
+
+constexpr int kU = cdam_model::kInputs;     // inputs per row
+constexpr int kY = cdam_model::kOutputs;    // outputs per row
+constexpr int kT0 = cdam_model::kHistory;   // measured rows before the first prediction
+
+inline std::uint32_t fnv1a_floats(std::uint32_t h, const float* p, unsigned n) {
+  const auto* b = reinterpret_cast<const unsigned char*>(p);
+  for (unsigned k = 0; k < n * sizeof(float); ++k) h = (h ^ b[k]) * 0x01000193u;
+  return h;
+}
+
+#if CDAM_MODEL_KIND == 1 || CDAM_MODEL_KIND == 2
+
+// y(t) = A [y(t-1); ...; y(t-na)] + (B [f(t-nk); ...; f(t-nk-nb+1)] + c) [+ w N(f lags)]
+// (cdam_core.models.arx.ArxModel, hybrid.HybridNarx); coef rows: y lags, f lags, constant.
+class StepModel {
+ public:
+  static constexpr int kNa = cdam_model::kNa, kNb = cdam_model::kNb, kNk = cdam_model::kNk;
+  static constexpr int kF = cdam_model::kFeatures;
+  static constexpr int kYRows = kNa > 0 ? kNa : 1;
+  static constexpr int kFRows = kNk + kNb > 0 ? kNk + kNb : 1;   // f(t) .. f(t-nk-nb+1)
+  static constexpr int kRows = kNa * kY + kNb * kF + 1;
+
+  void prime(const float* u, const float* y) {
+    push_features(u);
+    push_output(y);
+  }
+
+  void step(const float* u, float* y) {
+    push_features(u);
+    const float* coef = cdam_model::kCoef;   // kRows x kY, row-major
+    float lagged[kNb * kF > 0 ? kNb * kF : 1];
+    for (int j = 0; j < kNb; ++j)
+      for (int c = 0; c < kF; ++c) lagged[j * kF + c] = f_[kNk + j][c];
+#if CDAM_MODEL_KIND == 2 && CDAM_MODEL_HAS_NET
+    float net[kY];
+    network(lagged, net);
+#endif
+    for (int o = 0; o < kY; ++o) {
+      float past = 0.0f;   // past @ Wy
+      for (int j = 0; j < kNa; ++j)
+        for (int c = 0; c < kY; ++c) past = past + y_[j][c] * coef[(j * kY + c) * kY + o];
+      float term = 0.0f;   // [lagged f, 1] @ Wu
+      for (int r = 0; r < kNb * kF; ++r) term = term + lagged[r] * coef[(kNa * kY + r) * kY + o];
+      term = term + 1.0f * coef[(kRows - 1) * kY + o];
+#if CDAM_MODEL_KIND == 2 && CDAM_MODEL_HAS_NET
+      term = term + cdam_model::kResidualWeight * net[o];
+#endif
+      y[o] = past + term;
+    }
+    push_output(y);
+  }
+
+  void correct(const float* y) {
+    if (kNa > 0)
+      for (int c = 0; c < kY; ++c) y_[0][c] = y[c];
+  }
+
+ private:
+  void push_features(const float* u) {
+    for (int j = kFRows - 1; j > 0; --j)
+      for (int c = 0; c < kF; ++c) f_[j][c] = f_[j - 1][c];
+    features(u, f_[0]);
+  }
+
+  void push_output(const float* y) {
+    if (kNa == 0) return;
+    for (int j = kYRows - 1; j > 0; --j)
+      for (int c = 0; c < kY; ++c) y_[j][c] = y_[j - 1][c];
+    for (int c = 0; c < kY; ++c) y_[0][c] = y[c];
+  }
+
+  // raw: the inputs; physics: [u / scale (4), T, roll, pitch, yaw] of f_i = (u_i / scale_i)^2
+  static void features(const float* u, float* f) {
+    if (!cdam_model::kPhysics) {
+      for (int c = 0; c < kF; ++c) f[c] = u[c];
+      return;
+    }
+    float q[4];
+    for (int c = 0; c < 4; ++c) {
+      f[c] = u[c] / cdam_model::kFeatureScale[c];
+      q[c] = f[c] * f[c];
+    }
+    f[4] = ((q[0] + q[1]) + q[2]) + q[3];
+    f[5] = ((q[0] + q[3]) - q[1]) - q[2];
+    f[6] = ((q[0] + q[1]) - q[2]) - q[3];
+    f[7] = ((q[0] - q[1]) + q[2]) - q[3];
+  }
+
+#if CDAM_MODEL_KIND == 2 && CDAM_MODEL_HAS_NET
+  // the residual network: min-max scaling, cdam::Mlp with the fast activation, back-scaling
+  static void network(const float* x, float* y) {
+    using Net = cdam::Mlp<float, cdam_model::kNetInputs, cdam_model::kNetHidden, kY,
+                          cdam::FastActivation>;
+    const Net net(cdam_model::kNetInputs, cdam_model::kNetHidden, kY,
+                  cdam_model::kNetTansig ? cdam::Activation::Tansig : cdam::Activation::Logsig);
+    float xn[cdam_model::kNetInputs], hidden[cdam_model::kNetHidden], yn[kY];
+    for (int k = 0; k < cdam_model::kNetInputs; ++k)
+      xn[k] = cdam::minmax_forward(x[k], cdam_model::kNetXMin[k], cdam_model::kNetXMax[k]);
+    net.forward(cdam_model::kNetTheta, xn, hidden, yn);
+    for (int k = 0; k < kY; ++k)
+      y[k] = cdam::minmax_inverse(yn[k], cdam_model::kNetYMin[k], cdam_model::kNetYMax[k]);
+  }
+#endif
+
+  float y_[kYRows][kY] = {};
+  float f_[kFRows][kF] = {};
+};
+
+inline std::uint32_t params_fnv1a() {
+  std::uint32_t h = fnv1a_floats(0x811C9DC5u, cdam_model::kCoef, sizeof(cdam_model::kCoef) / 4);
+#if CDAM_MODEL_KIND == 2 && CDAM_MODEL_HAS_NET
+  h = fnv1a_floats(h, cdam_model::kNetTheta, sizeof(cdam_model::kNetTheta) / 4);
+#endif
+  return h;
+}
+
+#elif CDAM_MODEL_KIND == 3
+
+// Grey-box step (GreyBox._rollout): the state is the position x and the velocity v per
+// coordinate; each sample integrates `kSubsteps` semi-implicit Euler substeps of length h,
+//   a = Inertia e(x, v, u),  v = v + h a,  x = x + h v,
+// where e is the equations' error at zero acceleration, y - sum_p theta_p column_p, the columns
+// in the Python order: the declared model's, then each effect's. The input of row t-1 drives the
+// step to row t; a measured row sets x = y(t) and v = (y(t) - y(t-1)) / dt.
+namespace effect {   // codes written by the exporter (cdam_core.firmware.step.EFFECT_CODES)
+constexpr int kCoulomb = 1, kAsymmetric = 2, kExternalForce = 3, kDelay = 4, kBacklash = 5,
+              kHardening = 6, kPayload = 7, kGroundEffect = 8, kThrustLoss = 9;
+
+constexpr bool present(int code) {
+  for (int k = 0; k < cdam_model::kEffects; ++k)
+    if (cdam_model::kEffectCode[k] == code) return true;
+  return false;
+}
+}  // namespace effect
+
+class StepModel {
+ public:
+  static constexpr int kN = kY;    // positions
+  static constexpr int kE = cdam_model::kEffects;
+  static constexpr int kLag = cdam_model::kDelayLag;   // rows of raw input history for delays
+  static constexpr int kRing = kLag + 1;
+
+  void prime(const float* u, const float* y) {
+    push_input(u);
+    measured(y);
+  }
+
+  void step(const float* u, float* y) {
+    float ue[kU > 0 ? kU : 1];
+    effective_input(ue);   // the input of row t-1, after the effects' delays
+    constexpr float h = cdam_model::kH;
+    for (int s = 0; s < cdam_model::kSubsteps; ++s) {
+      float e[kN], a[kN];
+      errors(ue, e);
+      for (int i = 0; i < kN; ++i) {
+        float acc = 0.0f;
+        for (int j = 0; j < kN; ++j) acc = acc + cdam_model::kInertia[i * kN + j] * e[j];
+        a[i] = acc;
+      }
+      for (int i = 0; i < kN; ++i) v_[i] = v_[i] + h * a[i];
+      for (int i = 0; i < kN; ++i) x_[i] = x_[i] + h * v_[i];
+    }
+    for (int i = 0; i < kN; ++i) {
+      xprev_[i] = xlast_[i];
+      xlast_[i] = x_[i];
+      y[i] = x_[i];
+    }
+    push_input(u);
+  }
+
+  void correct(const float* y) {
+    for (int i = 0; i < kN; ++i) xlast_[i] = xprev_[i];
+    measured(y);
+  }
+
+ private:
+  void measured(const float* y) {
+    for (int i = 0; i < kN; ++i) {
+      x_[i] = y[i];
+      v_[i] = (y[i] - xlast_[i]) / cdam_model::kDt;
+      xprev_[i] = xlast_[i];
+      xlast_[i] = y[i];
+    }
+  }
+
+  // raw input history: a ring of kRing rows, `head_` the newest; before the record's first
+  // row it holds that row (np.interp holds the first value before the start). rows_ counts the
+  // rows pushed and stops at 2^31 - 1 (24 days at 1 kHz; no signed overflow).
+  void push_input(const float* u) {
+    if constexpr (kRing > 1) {
+      if (rows_ == 0)
+        for (int j = 0; j < kRing; ++j)
+          for (int c = 0; c < kU; ++c) u_[j][c] = u[c];
+      head_ = head_ + 1 < kRing ? head_ + 1 : 0;
+    }
+    for (int c = 0; c < kU; ++c) u_[head_][c] = u[c];
+    if (kCountRows && rows_ < 0x7FFFFFFF) ++rows_;
+  }
+
+  // the row count matters to the delays (the record's start) and the thrust loss (time)
+  static constexpr bool kCountRows = kRing > 1 || effect::present(effect::kThrustLoss);
+
+
+  // the input row `back` rows before the newest (0 <= back < kRing)
+  const float* input(int back) const {
+    if constexpr (kRing == 1) return u_[0];   // no delay: the newest row only
+    const int k = head_ - back;
+    return u_[k < 0 ? k + kRing : k];
+  }
+
+  // u(t - 1) with every delay applied: u(t-1-delay) = u[k-L] + frac (u[k-L+1] - u[k-L]) as
+  // np.interp: slope (fp[j+1] - fp[j]) / (xp[j+1] - xp[j]) times (x - xp[j]), plus fp[j]
+  void effective_input(float* ue) const {
+    const float* now = input(0);
+    for (int c = 0; c < kU; ++c) ue[c] = now[c];
+    for (int k = 0; k < kE; ++k) {
+      if (cdam_model::kEffectCode[k] != effect::kDelay) continue;
+      const int c = cdam_model::kEffectIndex[k];
+      const int lag = cdam_model::kEffectLag[k];
+      const float* p = &cdam_model::kEffectParam[k * 4];
+      const float lo = input(lag)[c], hi = input(lag > 0 ? lag - 1 : 0)[c];
+      // before the record's start np.interp returns its first value (lo and hi hold it there:
+      // the ring starts filled with the first row)
+      ue[c] = rows_ - 1 < lag ? lo : (hi - lo) / p[1] * p[0] + lo;
+    }
+  }
+
+  // Equation errors at zero acceleration, each equation's columns in GreyBox's order: the
+  // declared model's, then each effect's (the acceleration columns vanish exactly: 0 * theta).
+  void errors(const float* u, float* e) const {
+    const float* th = cdam_model::kBase;   // the declared model's parameter_names, in order
+#if CDAM_MODEL_DECLARED == 0
+    // rigid_axis: tau = M q'' + Fv q' + offset
+    e[0] = u[0];
+    e[0] = e[0] - th[1] * v_[0];
+    e[0] = e[0] - th[2] * 1.0f;
+#elif CDAM_MODEL_DECLARED == 1
+    // flexible_joint [Im, Dm, Ks, Kd, I, Dl, G], positions (theta_m, q), cable deflection
+    // d = theta_m - q (through a backlash dead band if the model has one), rate dd:
+    //   tau_m: tau_m = Im thm'' + Dm thm' + Ks d + Kd dd
+    //   tau_l: 0 = I q'' + Dl q' + G sin q - Ks d - Kd dd
+    const float d = deflection();
+    const float dd = v_[0] - v_[1];
+    e[0] = u[0];
+    e[0] = e[0] - th[1] * v_[0];
+    e[0] = e[0] - th[2] * d;
+    e[0] = e[0] - th[3] * dd;
+    e[1] = 0.0f;
+    e[1] = e[1] - th[5] * v_[1];
+    e[1] = e[1] - th[6] * std::sin(x_[1]);
+    e[1] = e[1] - th[2] * -d;
+    e[1] = e[1] - th[3] * -dd;
+#elif CDAM_MODEL_DECLARED == 2
+    // quadrotor [m, Kx, Ky, Kz, Jx, Jy, Jz, Kphi, Ktheta, Kpsi], positions (phi, theta, psi,
+    // X, Y, Z), inputs (T, tau_phi, tau_theta, tau_psi); flight.Quadrotor.equations
+    const float pd = v_[0], td = v_[1], yd = v_[2];
+    const float tz = vertical_thrust(u);
+    float ux, uy;
+    thrust_xy(&ux, &uy);
+    e[0] = u[0] * ux;
+    e[0] = e[0] - th[1] * v_[3];
+    e[1] = u[0] * uy;
+    e[1] = e[1] - th[2] * v_[4];
+    e[2] = tz;
+    e[2] = e[2] - th[0] * (0.0f + kG0);
+    e[2] = e[2] - th[3] * v_[5];
+    e[3] = u[1];
+    e[3] = e[3] - th[5] * (-td * yd);
+    e[3] = e[3] - th[6] * (td * yd);
+    e[3] = e[3] - th[7] * pd;
+    e[4] = u[2];
+    e[4] = e[4] - th[6] * (-pd * yd);
+    e[4] = e[4] - th[4] * (pd * yd);
+    e[4] = e[4] - th[8] * td;
+    e[5] = u[3];
+    e[5] = e[5] - th[4] * (-pd * td);
+    e[5] = e[5] - th[5] * (pd * td);
+    e[5] = e[5] - th[9] * yd;
+#else
+#error "declared model not supported on the firmware"
+#endif
+    for (int k = 0; k < kE; ++k) {
+      const float* p = &cdam_model::kEffectParam[k * 4];
+      float& r = e[cdam_model::kEffectEq[k]];
+      const float v = v_[cdam_model::kEffectVel[k]];
+      switch (cdam_model::kEffectCode[k]) {
+        case effect::kCoulomb: {   // Fc sign(v), or Fc tanh(v / eps)
+          const float s = p[1] > 0.0f ? std::tanh(v / p[1])
+                                      : static_cast<float>((v > 0.0f) - (v < 0.0f));
+          r = r - p[0] * s;
+          break;
+        }
+        case effect::kAsymmetric: {   // dFv v [v > 0], and dFc [v > 0] without an offset
+          const float pos = v > 0.0f ? 1.0f : 0.0f;
+          r = r - p[0] * (v * pos);
+          if (p[2] != 0.0f) r = r - p[1] * pos;
+          break;
+        }
+        case effect::kExternalForce:   // gain (-u_extra)
+          r = r - p[0] * -u[cdam_model::kEffectIndex[k]];
+          break;
+#if CDAM_MODEL_DECLARED == 1
+        case effect::kHardening: {   // K3 d^3 on the motor side, -K3 d^3 on the link side
+          const float d3 = (d * d) * d;
+          e[0] = e[0] - p[0] * d3;
+          e[1] = e[1] - p[0] * -d3;
+          break;
+        }
+        case effect::kPayload:   // m (l^2 q'' + g l sin q) on the link side, q'' = 0
+          r = r - p[0] * (0.0f + p[1] * std::sin(x_[1]));
+          break;
+#endif
+#if CDAM_MODEL_DECLARED == 2
+        case effect::kPayload:   // mass (Z'' + g) on Z, Z'' = 0
+          r = r - p[0] * (0.0f + kG0);
+          break;
+        case effect::kGroundEffect: {   // k (-T cphi ctheta (R / 4 max(Z, 0.05))^2)
+          const float z = x_[5] > 0.05f ? x_[5] : 0.05f;
+          const float q = p[1] / (4.0f * z);
+          r = r - p[0] * (-tz * (q * q));
+          break;
+        }
+        case effect::kThrustLoss:   // c (T cphi ctheta t), t from the record's first row
+          r = r - p[0] * (tz * (static_cast<float>(rows_ - 1) * cdam_model::kDt));
+          break;
+#endif
+        default:   // delays and backlash act on the inputs and the deflection, not here
+          break;
+      }
+    }
+  }
+
+#if CDAM_MODEL_DECLARED == 2
+  static constexpr float kG0 = 9.81f;   // cdam_core.models.greybox.flight.G0
+  // T times the world z component of the body z axis (Z-Y-X Euler angles): T cphi ctheta
+  float vertical_thrust(const float* u) const {
+    return u[0] * (std::cos(x_[0]) * std::cos(x_[1]));
+  }
+  // world x and y components: cphi stheta cpsi + sphi spsi, cphi stheta spsi - sphi cpsi
+  void thrust_xy(float* ux, float* uy) const {
+    const float cf = std::cos(x_[0]), sf = std::sin(x_[0]);
+    const float st = std::sin(x_[1]);
+    const float cp = std::cos(x_[2]), sp = std::sin(x_[2]);
+    *ux = cf * st * cp + sf * sp;
+    *uy = cf * st * sp - sf * cp;
+  }
+#endif
+
+#if CDAM_MODEL_DECLARED == 1
+  // sign(d) max(|d| - width / 2, 0) when the model has a backlash (Backlash.transform_state)
+  float deflection() const {
+    const float d = x_[0] - x_[1];
+    for (int k = 0; k < kE; ++k) {
+      if (cdam_model::kEffectCode[k] != effect::kBacklash) continue;
+      const float h = cdam_model::kEffectParam[k * 4];
+      const float m = std::fabs(d) - h;
+      return static_cast<float>((d > 0.0f) - (d < 0.0f)) * (m > 0.0f ? m : 0.0f);
+    }
+    return d;
+  }
+#endif
+
+  float x_[kN] = {}, v_[kN] = {}, xlast_[kN] = {}, xprev_[kN] = {};
+  float u_[kRing][kU] = {};
+  int head_ = 0;
+  int rows_ = 0;
+};
+
+inline std::uint32_t params_fnv1a() {
+  std::uint32_t h = fnv1a_floats(0x811C9DC5u, cdam_model::kBase, sizeof(cdam_model::kBase) / 4);
+  h = fnv1a_floats(h, cdam_model::kInertia, sizeof(cdam_model::kInertia) / 4);
+  return fnv1a_floats(h, cdam_model::kEffectParam, sizeof(cdam_model::kEffectParam) / 4);
+}
+
+#endif
+
+}  // namespace fw

@@ -1,0 +1,236 @@
+"""The dynamic model kinds on the firmware (``arx``, ``hybrid``, ``greybox``): the numbers the
+target's ``fw::StepModel`` (firmware_stubs/include/fw/step_model.hpp) runs, and the Python model
+it is checked against.
+
+What reaches the generated header is numbers only: sizes and orders, coefficients, the network's
+weights and scalers, the grey-box parameters, its inverse inertia matrix, step and substeps, and
+for each effect an integer code (:data:`EFFECT_CODES`) with its values. The declared model is a
+code too (:data:`DECLARED_CODES`). Names, effect names, column names and any other text of the
+file never do.
+
+Grey-box: the firmware supports the declared models in :data:`DECLARED_CODES` with the effects in
+:data:`EFFECT_CODES`; any other is refused with the model or effect named (which is safe: those
+names were checked against the library's own on load, and go to the error message only).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from cdam_core.firmware.numbers import c_array, c_float, c_int_array, finite32, theta_fnv1a
+
+KIND_CODES = {"bp_network": 0, "arx": 1, "hybrid": 2, "greybox": 3}
+DECLARED_CODES = {"rigid_axis": 0, "flexible_joint": 1, "quadrotor": 2}
+EFFECT_CODES = {"coulomb_friction": 1, "asymmetric_friction": 2, "external_force": 3,
+                "actuator_delay": 4, "backlash": 5, "hardening_stiffness": 6, "payload_mass": 7,
+                "ground_effect": 8, "thrust_loss": 9}
+G0 = 9.81   # cdam_core.models.greybox.effects.G0 and flight.G0 (the firmware's kG0), tested
+MAX_DELAY_ROWS = 1024      # input rows kept for an actuator delay (4 KB of RAM per input)
+MAX_COEFS = 100_000        # ARX rows x outputs, network weights (above the M4F's flash)
+MAX_SUBSTEPS = 1000        # grey-box substeps per sample on the target
+
+
+@dataclass
+class StepFirmwareModel:
+    """A dynamic model as the firmware runs it (see the module doc)."""
+
+    kind: str
+    model: object              # the Python model (cdam_core.models), the reference
+    inputs: list
+    outputs: list
+    history: int               # measured rows before the first prediction (t0)
+    sha256: str
+    source: str = ""
+    ints: dict = field(default_factory=dict)        # constexpr int (and bool) constants
+    floats: dict = field(default_factory=dict)      # constexpr float constants
+    arrays: dict = field(default_factory=dict)      # float arrays, in the header's order
+    int_arrays: dict = field(default_factory=dict)
+    macros: dict = field(default_factory=dict)      # preprocessor selection (integers)
+    hashed: tuple = ()         # arrays the firmware's FNV-1a covers, in order
+
+    @property
+    def n_inputs(self) -> int:
+        return len(self.inputs)
+
+    @property
+    def n_outputs(self) -> int:
+        return len(self.outputs)
+
+    def params_fnv1a(self) -> int:
+        return theta_fnv1a(np.concatenate([np.asarray(self.arrays[n], np.float64).ravel()
+                                           for n in self.hashed]))
+
+    def predict(self, U, Y, mode: str) -> np.ndarray:
+        """The Python model's prediction (float64), rows t0.. (``one_step`` or ``free_run``)."""
+        return self.model.predict(U, Y, mode=mode)[self.history:]
+
+    def describe(self) -> str:
+        """One line without any name from the file."""
+        i = self.ints
+        if self.kind in ("arx", "hybrid"):
+            net = (f" + {i['kNetInputs']}-{i['kNetHidden']}-{self.n_outputs} network"
+                   if self.macros.get("CDAM_MODEL_HAS_NET") else "")
+            feats = "physics" if i["kPhysics"] else "raw"
+            return (f"{self.kind} ({i['kNa']}, {i['kNb']}, {i['kNk']}) on {feats} features, "
+                    f"{self.n_inputs} in, {self.n_outputs} out{net}")
+        return (f"greybox, {self.model.declared}, {i['kEffects']} effect(s), "
+                f"{i['kSubsteps']} substep(s) per sample")
+
+    def header(self) -> list[str]:
+        """The header's lines after the common preamble (namespace cdam_model, numbers only)."""
+        lines = [f"#define {k} {int(v)}" for k, v in self.macros.items()]
+        lines += ["", "namespace cdam_model {", ""]
+        for k, v in self.ints.items():
+            lines.append(f"constexpr bool {k} = {'true' if v else 'false'};" if isinstance(v, bool)
+                         else f"constexpr int {k} = {int(v)};")
+        for k, v in self.floats.items():
+            lines.append(f"constexpr float {k} = {c_float(v)};")
+        lines.append(f'constexpr char kSourceSha256[] = "{self.sha256}";')
+        lines.append(f"constexpr std::uint32_t kParamsFnv1a = 0x{self.params_fnv1a():08X}u;")
+        lines.append("")
+        for k, v in self.arrays.items():
+            lines.append(c_array(k, np.asarray(v, np.float64).ravel()))
+        for k, v in self.int_arrays.items():
+            lines.append(c_int_array(k, v))
+        lines += ["}  // namespace cdam_model", ""]
+        return lines
+
+
+def step_model(mf, source: str = "") -> StepFirmwareModel:
+    """The StepFirmwareModel of a read model file (``cdam_core.models.file.read_model_file``)."""
+    if mf.kind in ("arx", "hybrid"):
+        fm = _arx(mf)
+    elif mf.kind == "greybox":
+        fm = _greybox(mf)
+    else:
+        raise ValueError(f"MODEL: a {mf.kind!r} model cannot run on the firmware")
+    fm.source = str(source)
+    for name, values in fm.arrays.items():
+        finite32(name, values)
+    for name, value in fm.floats.items():
+        finite32(name, [value])
+    return fm
+
+
+def _arx(mf) -> StepFirmwareModel:
+    m = mf.model
+    na, nb, nk = (int(v) for v in m.narx)
+    ny, nf = int(m.n_outputs_), int(m.n_features)
+    coef = np.asarray(m.coef_, dtype=np.float64)
+    if coef.shape != (na * ny + nb * nf + 1, ny) or coef.size > MAX_COEFS:
+        raise ValueError(f"MODEL: model.coef: shape {coef.shape} does not fit the firmware")
+    physics = m.features == "physics"
+    fm = StepFirmwareModel(
+        mf.kind, m, list(mf.inputs), list(mf.outputs), int(m.t0), mf.sha256,
+        ints={"kKind": KIND_CODES[mf.kind], "kInputs": int(m.n_inputs_), "kOutputs": ny,
+              "kHistory": int(m.t0), "kNa": na, "kNb": nb, "kNk": nk, "kFeatures": nf,
+              "kPhysics": physics},
+        macros={"CDAM_MODEL_KIND": KIND_CODES[mf.kind]}, hashed=("kCoef",))
+    fm.arrays["kCoef"] = coef                       # row-major: rows x outputs
+    fm.arrays["kFeatureScale"] = (np.asarray(m.feature_scale_, np.float64) if physics
+                                  else np.ones(4))
+    net = getattr(m, "net_", None) if mf.kind == "hybrid" else None
+    has_net = net is not None and float(m.residual_weight_) != 0.0
+    fm.macros["CDAM_MODEL_HAS_NET"] = int(has_net)
+    if has_net:
+        if net.activation not in ("tansig", "logsig"):
+            raise ValueError(f"MODEL: model.network.activation {net.activation!r} is not supported")
+        if np.asarray(net.theta_).size > MAX_COEFS:
+            raise ValueError(f"MODEL: model.network: {np.asarray(net.theta_).size} weights do "
+                             f"not fit the firmware (at most {MAX_COEFS})")
+        fm.ints.update({"kNetInputs": int(net.n_inputs_), "kNetHidden": int(net.hidden_),
+                        "kNetTansig": net.activation == "tansig"})
+        fm.floats["kResidualWeight"] = float(m.residual_weight_)
+        fm.arrays.update({"kNetTheta": net.theta_, "kNetXMin": net.scaler_x_.data_min_,
+                          "kNetXMax": net.scaler_x_.data_max_,
+                          "kNetYMin": net.scaler_y_.data_min_,
+                          "kNetYMax": net.scaler_y_.data_max_})
+        fm.hashed = ("kCoef", "kNetTheta")
+    return fm
+
+
+def _greybox(mf) -> StepFirmwareModel:
+    g = mf.model
+    if g.declared not in DECLARED_CODES:
+        raise ValueError(f"MODEL: a greybox model of {g.declared!r} cannot run on the firmware "
+                         f"yet (it runs {', '.join(DECLARED_CODES)})")
+    decl = g._m                                   # the declared model (read only)
+    inertia = np.asarray(g._inertia, np.float64)  # how the accelerations enter (read only)
+    n, ni = len(decl.positions), len(decl.inputs)
+    dt, sub = float(g.dt), int(g.substeps_)
+    if not 1 <= sub <= MAX_SUBSTEPS:
+        raise ValueError(f"MODEL: model.substeps: {sub} is outside 1..{MAX_SUBSTEPS} on the "
+                         f"firmware")
+    base = [g.theta_[p] for p in decl.parameter_names]
+    codes, eqs, vels, index, lag, params = [], [], [], [], [], []
+    delayed = set()
+    equations = list(decl.equation_names)
+    for j, e in enumerate(g.effects):
+        if e.name not in EFFECT_CODES:
+            raise ValueError(f"MODEL: model.effects[{j}]: effect {e.name!r} cannot run on the "
+                             f"firmware yet (it runs {', '.join(EFFECT_CODES)})")
+        key, th = e.key, g.theta_
+        eq = equations.index(e.channel) if e.channel in equations else 0
+        vel = (list(decl.positions).index(decl.viscous[e.channel][1][:-2])
+               if e.channel in decl.viscous else 0)
+        if e.name == "coulomb_friction":
+            rows = [(0, 0, [th[f"{key}.Fc"], float(e.eps), 0.0, 0.0])]
+        elif e.name == "asymmetric_friction":
+            has_dfc = e.channel not in decl.offset
+            rows = [(0, 0, [th[f"{key}.dFv"], th[f"{key}.dFc"] if has_dfc else 0.0,
+                            float(has_dfc), 0.0])]
+        elif e.name == "external_force":
+            col = ni + list(g.extra_columns).index(e.column)
+            rows = [(col, 0, [th[f"{key}.gain"], 0.0, 0.0, 0.0])]
+        elif e.name == "backlash":
+            rows = [(0, 0, [0.5 * float(e.width), 0.0, 0.0, 0.0])]
+        elif e.name == "hardening_stiffness":
+            rows = [(0, 0, [th[f"{key}.K3"], 0.0, 0.0, 0.0])]
+        elif e.name == "payload_mass" and g.declared == "flexible_joint":
+            rows = [(0, 0, [th[f"{key}.m"], G0 * float(e.length), 0.0, 0.0])]
+        elif e.name == "payload_mass":     # the flight models: a mass on Z
+            rows = [(0, 0, [th[f"{key}.mass"], 0.0, 0.0, 0.0])]
+        elif e.name == "ground_effect":
+            rows = [(0, 0, [th[f"{key}.k"], float(e.rotor_radius), 0.0, 0.0])]
+        elif e.name == "thrust_loss":
+            rows = [(0, 0, [th[f"{key}.c"], 0.0, 0.0, 0.0])]
+        else:   # actuator_delay: u(t - delay) by linear interpolation between two rows
+            if float(e.delay) <= 0.0:
+                continue                        # Python leaves the inputs as they are
+            lags = float(e.delay) / dt
+            L = int(np.ceil(lags))
+            if L > MAX_DELAY_ROWS:
+                raise ValueError(f"MODEL: model.effects[{j}].delay: {L} samples exceed the "
+                                 f"firmware's {MAX_DELAY_ROWS}")
+            rows = []
+            for c in e.commands:
+                cidx = list(decl.inputs).index(c)
+                if cidx in delayed:
+                    raise ValueError(f"MODEL: model.effects[{j}]: a second delay on one input")
+                delayed.add(cidx)
+                rows.append((cidx, L, [L * dt - float(e.delay), dt, 0.0, 0.0]))
+        for col, L, p in rows:
+            codes.append(EFFECT_CODES[e.name])
+            eqs.append(eq)
+            vels.append(vel)
+            index.append(col)
+            lag.append(L)
+            params.append(p)
+    E = len(codes)
+    fm = StepFirmwareModel(
+        "greybox", g, list(mf.inputs), list(mf.outputs), int(g.t0), mf.sha256,
+        ints={"kKind": KIND_CODES["greybox"], "kInputs": int(g.n_inputs_), "kOutputs": n,
+              "kHistory": int(g.t0), "kSubsteps": sub, "kEffects": E,
+              "kDelayLag": max(lag, default=0)},
+        floats={"kDt": dt, "kH": dt / sub},
+        macros={"CDAM_MODEL_KIND": KIND_CODES["greybox"],
+                "CDAM_MODEL_DECLARED": DECLARED_CODES[g.declared]},
+        hashed=("kBase", "kInertia", "kEffectParam"))
+    fm.arrays = {"kBase": base, "kInertia": inertia,
+                 # one row of four values per effect (a zero row when there is none)
+                 "kEffectParam": np.asarray(params, np.float64).ravel() if E else np.zeros(4)}
+    fm.int_arrays = {"kEffectCode": codes or [0], "kEffectEq": eqs or [0],
+                     "kEffectVel": vels or [0], "kEffectIndex": index or [0],
+                     "kEffectLag": lag or [0]}
+    return fm

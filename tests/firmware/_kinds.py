@@ -1,0 +1,226 @@
+"""Model files of every dynamic kind for the firmware tests (no shared data needed), and plain
+numpy float32 twins of the firmware's step written from the equations (docs/MODEL_FILE.md, the
+module docs of cdam_core.models.arx and greybox.augmented), not from the exporter."""
+from __future__ import annotations
+
+import numpy as np
+
+from cdam_core.models import ArxModel
+from cdam_core.models.file import save_model
+from cdam_core.models.greybox.augmented import GreyBox
+from cdam_core.models.hybrid import HybridNarx
+
+F32 = np.float32
+
+
+def _held(rng, n, cols, lo, hi, hold=10):
+    return np.repeat(rng.uniform(lo, hi, (n // hold + 1, cols)), hold, axis=0)[:n]
+
+
+def arx_file(path, physics=False):
+    """A stable two-output ARX(2, 2, 1) fitted on a simulated record (raw features), or an
+    ARX(1, 2, 1) on the physics features of four motor commands."""
+    rng = np.random.default_rng(0)
+    n = 2000
+    if physics:
+        U = _held(rng, n, 4, 0.2, 1.0) * np.array([400.0, 410.0, 390.0, 405.0])
+        Y = np.zeros((n, 1))
+        for t in range(1, n):
+            Y[t, 0] = 0.8 * Y[t - 1, 0] + 1e-6 * np.sum(U[t - 1] ** 2)
+        model, names = ArxModel((1, 2, 1), features="physics"), ["m1", "m2", "m3", "m4"]
+    else:
+        U = _held(rng, n, 2, -1.0, 1.0)
+        Y = np.zeros((n, 2))
+        for t in range(2, n):
+            Y[t, 0] = 1.2 * Y[t - 1, 0] - 0.5 * Y[t - 2, 0] + 0.4 * U[t - 1, 0] + 0.05
+            Y[t, 1] = 0.7 * Y[t - 1, 1] + 0.1 * Y[t - 1, 0] + 0.3 * U[t - 1, 1] - 0.2 * U[t - 2, 0]
+        model, names = ArxModel((2, 2, 1)), ["u1", "u2"]
+    Y = Y + 1e-3 * rng.standard_normal(Y.shape)
+    save_model(path, model.fit(U, Y), inputs=names,
+               outputs=[f"y{k}" for k in range(Y.shape[1])])
+    return path
+
+
+def hybrid_file(path):
+    """HybridNarx((2, 2, 0)) on a record with a tanh and a square the ARX part misses."""
+    rng = np.random.default_rng(1)
+    n = 2000
+    u = _held(rng, n, 2, -1.0, 1.0)
+    y = np.zeros((n, 2))
+    for t in range(2, n):
+        y[t, 0] = 0.6 * y[t - 1, 0] - 0.1 * y[t - 2, 0] + 0.5 * np.tanh(2 * u[t - 1, 0])
+        y[t, 1] = 0.7 * y[t - 1, 1] + 0.2 * y[t - 1, 0] + 0.3 * u[t, 1] ** 2
+    y = y + 1e-3 * rng.standard_normal(y.shape)
+    h = HybridNarx((2, 2, 0), seed=1).fit(u, y)
+    save_model(path, h, inputs=["u1", "u2"], outputs=["y1", "y2"])
+    return path, h
+
+
+RIGID = {"M": 95.0, "Fv": 240.0, "offset": -0.25, "Fc": 20.0, "dFv": -70.0, "gain": 0.5,
+         "delay": 0.0035, "dt": 0.001, "substeps": 3}
+
+
+def greybox_file(path, effects=("coulomb", "asymmetric", "external", "delay"), meta=None,
+                 inputs=("tau", "load"), outputs=("q",), extra_column="load"):
+    """A rigid_axis grey-box model with the numbers of RIGID and the chosen effects."""
+    p = RIGID
+    names, values = ["M", "Fv", "offset"], [p["M"], p["Fv"], p["offset"]]
+    eff = []
+    if "coulomb" in effects:
+        eff.append({"name": "coulomb_friction", "channel": "tau", "eps": 0.0, "smooth": False})
+        names.append("coulomb_friction@tau.Fc")
+        values.append(p["Fc"])
+    if "asymmetric" in effects:
+        eff.append({"name": "asymmetric_friction", "channel": "tau"})
+        names.append("asymmetric_friction@tau.dFv")
+        values.append(p["dFv"])
+    extra = []
+    if "external" in effects:
+        extra = [extra_column]
+        eff.append({"name": "external_force", "channel": "tau", "column": extra_column})
+        names.append(f"external_force[{extra_column}]@tau.gain")
+        values.append(p["gain"])
+    if "delay" in effects:
+        eff.append({"name": "actuator_delay", "channel": "tau", "delay": p["delay"]})
+    d = {"declared": "rigid_axis", "dt": p["dt"], "n_inputs": 1 + len(extra), "n_outputs": 1,
+         "fixed": {}, "extra_columns": extra, "filter": {"cutoff_hz": 100.0, "order": 4},
+         "effects": eff, "parameters": {"names": names, "values": values,
+                                        "std": [None] * len(names), "estimated": names},
+         "substeps": p["substeps"]}
+    g = GreyBox.from_dict(d)
+    save_model(path, g, inputs=list(inputs)[:1 + len(extra)], outputs=list(outputs), meta=meta)
+    return path
+
+
+def rigid_record(n=600, seed=2, extra=True):
+    """Force (and load) held random levels beyond the friction; positions from the model."""
+    rng = np.random.default_rng(seed)
+    U = _held(rng, n, 2 if extra else 1, -60.0, 60.0, hold=40)
+    return U
+
+
+# ---- float32 twins: one operation after the other, as the equations are written ----
+
+def arx_twin32(coef, na, nb, nk, U, Y, mode, scale=None):
+    """ARX in float32: y(t) = sum A y(t-j) + (sum B f(t-nk-j) + c), features raw or physics."""
+    coef = np.asarray(coef, dtype=F32)
+    m = coef.shape[1]
+    if scale is not None:
+        u = U.astype(F32) / np.asarray(scale, F32)
+        q = u * u
+        F = np.column_stack([u, ((q[:, 0] + q[:, 1]) + q[:, 2]) + q[:, 3],
+                             ((q[:, 0] + q[:, 3]) - q[:, 1]) - q[:, 2],
+                             ((q[:, 0] + q[:, 1]) - q[:, 2]) - q[:, 3],
+                             ((q[:, 0] - q[:, 1]) + q[:, 2]) - q[:, 3]]).astype(F32)
+    else:
+        F = U.astype(F32)
+    nf = F.shape[1]
+    t0 = max(na, nk + nb - 1)
+    P = Y.astype(F32).copy()
+    out = []
+    for t in range(t0, len(U)):
+        y = np.zeros(m, F32)
+        for o in range(m):
+            past = F32(0)
+            for j in range(na):
+                for c in range(m):
+                    past = F32(past + F32(P[t - 1 - j, c] * coef[j * m + c, o]))
+            term = F32(0)
+            for j in range(nb):
+                for c in range(nf):
+                    term = F32(term + F32(F[t - nk - j, c] * coef[na * m + j * nf + c, o]))
+            term = F32(term + F32(F32(1) * coef[-1, o]))
+            y[o] = F32(past + term)
+        out.append(y)
+        if mode == "free_run":
+            P[t] = y
+    return np.array(out)
+
+
+def rigid_twin32(p, U, Y, mode, inertia=None):
+    """rigid_axis + Coulomb + asymmetric friction + external force + actuator delay in float32:
+    r = tau_d - Fv v - offset - Fc sign(v) - dFv v [v > 0] - gain (-load),  a = r / M,
+    substeps of v += h a, x += h v; tau_d = tau(t - delay) interpolated linearly (np.interp,
+    held at the first sample before the start). ``inertia``: the 1/M to use (float64)."""
+    dt, sub = p["dt"], p["substeps"]
+    h = F32(dt / sub)
+    inv = F32(1.0 / p["M"] if inertia is None else inertia)
+    n = len(U)
+    # the firmware interpolates in float32 on the float32 inputs: lag L, fraction as exported
+    L = int(np.ceil(p["delay"] / dt)) if p["delay"] else 0
+    u32 = U.astype(F32)
+    Y32 = Y.astype(F32)
+    x, v = Y32[1, 0], F32(F32(Y32[1, 0] - Y32[0, 0]) / F32(dt))
+    out = []
+    for k in range(1, n - 1):          # state at row k -> row k + 1
+        if mode == "one_step":
+            x, v = Y32[k, 0], F32(F32(Y32[k, 0] - Y32[k - 1, 0]) / F32(dt))
+        if L:
+            if k < L:
+                td = u32[0, 0]
+            else:
+                lo, hi = u32[k - L, 0], u32[k - L + 1, 0]
+                td = F32(F32(F32(F32(hi - lo) / F32(dt)) * F32(L * dt - p["delay"])) + lo)
+        else:
+            td = u32[k, 0]
+        for _ in range(sub):
+            r = td
+            r = F32(r - F32(F32(p["Fv"]) * v))
+            r = F32(r - F32(F32(p["offset"]) * F32(1)))
+            r = F32(r - F32(F32(p["Fc"]) * F32(np.sign(v))))
+            pos = F32(1) if v > 0 else F32(0)
+            r = F32(r - F32(F32(p["dFv"]) * F32(v * pos)))
+            if U.shape[1] > 1:
+                r = F32(r - F32(F32(p["gain"]) * F32(-u32[k, 1])))
+            a = F32(F32(0) + F32(inv * r))
+            v = F32(v + F32(h * a))
+            x = F32(x + F32(h * v))
+        out.append(x)
+    return np.array(out, dtype=F32)[:, None]
+
+
+FLEX_EFFECTS = [{"name": "backlash", "channel": "tau_l", "width": 0.02},
+                {"name": "hardening_stiffness", "channel": "tau_l"},
+                {"name": "coulomb_friction", "channel": "tau_m", "eps": 0.01, "smooth": True},
+                {"name": "asymmetric_friction", "channel": "tau_l"},
+                {"name": "payload_mass", "channel": "tau_l", "length": 0.3},
+                {"name": "actuator_delay", "channel": "tau_m", "delay": 0.0025}]
+
+
+def flexible_file(path):
+    """A flexible_joint grey-box model (one cable-driven joint) with every effect the library
+    has for it: backlash, a hardening cable, smoothed Coulomb friction on the motor,
+    asymmetric friction on the link, a payload and an actuator delay; 4 substeps."""
+    names = ["Im", "Dm", "Ks", "Kd", "I", "Dl", "G", "hardening_stiffness@tau_l.K3",
+             "coulomb_friction@tau_m.Fc", "asymmetric_friction@tau_l.dFv",
+             "asymmetric_friction@tau_l.dFc", "payload_mass@tau_l.m"]
+    values = [0.01, 0.1, 20.0, 0.05, 0.02, 0.05, 0.5, 300.0, 0.05, 0.01, 0.02, 0.2]
+    d = {"declared": "flexible_joint", "dt": 0.001, "n_inputs": 1, "n_outputs": 2,
+         "fixed": {"I": 0.02, "G": 0.5}, "extra_columns": [],
+         "filter": {"cutoff_hz": 100.0, "order": 4}, "effects": FLEX_EFFECTS,
+         "parameters": {"names": names, "values": values, "std": [None] * len(names),
+                        "estimated": [n for n in names if n not in ("I", "G")]},
+         "substeps": 4}
+    save_model(path, GreyBox.from_dict(d), inputs=["tau_m1"], outputs=["theta_m1", "q1"])
+    return path
+
+
+QUAD = {"names": ["m", "Kx", "Ky", "Kz", "Jx", "Jy", "Jz", "Kphi", "Ktheta", "Kpsi",
+                  "ground_effect@Z.k", "thrust_loss@Z.c", "payload_mass@Z.mass"],
+        "values": [1.8, 0.2, 0.2, 0.3, 0.02, 0.02, 0.04, 0.01, 0.01, 0.02, 1.0, 0.003, 0.2]}
+
+
+def quadrotor_file(path):
+    """A quadrotor grey-box model (flight.Quadrotor, dt 10 ms, 2 substeps) with the rotors'
+    shared delay, ground effect, thrust loss and a payload on Z."""
+    eff = [{"name": "actuator_delay", "channel": "rotors",
+            "channels": ["T", "tau_phi", "tau_theta", "tau_psi"], "delay": 0.025},
+           {"name": "ground_effect", "channel": "Z"}, {"name": "thrust_loss", "channel": "Z"},
+           {"name": "payload_mass", "channel": "Z"}]
+    d = {"declared": "quadrotor", "dt": 0.01, "n_inputs": 4, "n_outputs": 6,
+         "fixed": {"m": 1.8}, "extra_columns": [], "filter": {"cutoff_hz": 2.0, "order": 4},
+         "effects": eff, "parameters": {"names": QUAD["names"], "values": QUAD["values"],
+                                        "std": [None] * 13, "estimated": QUAD["names"][1:]},
+         "substeps": 2}
+    save_model(path, GreyBox.from_dict(d))
+    return path
