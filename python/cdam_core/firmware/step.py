@@ -177,7 +177,7 @@ def _greybox(mf) -> StepFirmwareModel:
         if e.name == "coulomb_friction":
             rows = [(0, 0, [th[f"{key}.Fc"], float(e.eps), 0.0, 0.0])]
         elif e.name == "asymmetric_friction":
-            has_dfc = e.channel not in decl.offset
+            has_dfc = f"{key}.dFc" in th   # the column exists when no offset is estimated
             rows = [(0, 0, [th[f"{key}.dFv"], th[f"{key}.dFc"] if has_dfc else 0.0,
                             float(has_dfc), 0.0])]
         elif e.name == "external_force":

@@ -182,10 +182,6 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None,
         rows = np.asarray(rows)
         if rows.dtype != bool or rows.shape != (n,):
             raise ValueError(f"rows: expected a boolean mask of {n} samples")
-    for e in effects:   # rows an effect cannot describe (a sign term at rest)
-        moving = e.moving_rows(s, model) if hasattr(e, "moving_rows") else None
-        if moving is not None:
-            rows = moving if rows is None else rows & moving
     if rows is not None:
         inner = np.zeros(n, dtype=bool)
         inner[keep] = True
@@ -193,6 +189,17 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None,
         if keep.size < 10:
             raise ValueError(f"rows: {keep.size} rows left to fit")
         base = None   # blocks are reused only between fits of the same rows
+    # rows an effect cannot describe (a sign term at rest) are left out of the estimation;
+    # the residuals still cover every kept row (comparable between fits)
+    use = None
+    for e in effects:
+        moving = e.moving_rows(s, model) if hasattr(e, "moving_rows") else None
+        if moving is not None:
+            use = moving[keep] if use is None else use & moving[keep]
+    if use is not None:
+        if int(use.sum()) < 10:
+            raise ValueError(f"effects: {int(use.sum())} rows in motion left to fit")
+        base = None
     names = []
     for _, cols in eqs.values():
         names += [p for p in cols if p not in names]
@@ -248,8 +255,9 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None,
                 raise ValueError("signals: the regressors contain NaN or Inf")
             ix = np.array([index[p] for p in ps], dtype=int)
             w2 = weights.get(eq, 1.0) ** 2
-            A[np.ix_(ix, ix)] += w2 * np.einsum("ij,ik->jk", X, X)
-            b[ix] += w2 * np.einsum("ij,i->j", X, y)
+            Xu, yu = (X, y) if use is None else (X[use], y[use])
+            A[np.ix_(ix, ix)] += w2 * np.einsum("ij,ik->jk", Xu, Xu)
+            b[ix] += w2 * np.einsum("ij,i->j", Xu, yu)
             blocks.append((eq, y, X, ix))
         scale = np.sqrt(np.diag(A)).copy()
         scale[scale == 0] = 1.0
@@ -265,7 +273,8 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None,
         unconstrained.update({p: float(th[index[p]]) for p in bad})
         violations += bad
         if bad and bounded:   # refit this block with the bounds (bounded linear least squares)
-            th = _bounded(blocks, weights, k, scale, lo, hi)
+            th = _bounded([(eq, y, X, ix) if use is None else (eq, y[use], X[use], ix)
+                           for eq, y, X, ix in blocks], weights, k, scale, lo, hi)
         if k:
             sv = np.sqrt(np.maximum(np.linalg.eigvalsh(As)[::-1], 0.0))
             conds.append(float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf"))
@@ -273,8 +282,9 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None,
         wsse, rows = 0.0, 0
         for eq, y, X, ix in blocks:
             resid[eq] = y - np.einsum("ij,j->i", X, th[ix])
-            wsse += weights.get(eq, 1.0) ** 2 * float(resid[eq] @ resid[eq])
-            rows += y.size
+            ru = resid[eq] if use is None else resid[eq][use]
+            wsse += weights.get(eq, 1.0) ** 2 * float(ru @ ru)
+            rows += ru.size
         std.update(_std(As, scale, wsse, rows, ps_all))
         for j, p in enumerate(ps_all):   # at an active bound the covariance formula does not hold
             if bad and bounded and (th[j] <= lo[j] or th[j] >= hi[j]):
