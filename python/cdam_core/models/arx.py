@@ -64,6 +64,7 @@ class ArxModel(Model):
     """Linear ARX (see the module doc): ``ArxModel(narx=(na, nb, nk), features="raw")``."""
 
     kind = "arx"
+    fits_segments = True
 
     def __init__(self, narx=(3, 3, 0), features: str = "raw"):
         self.orders = parse_orders(narx)
@@ -91,13 +92,18 @@ class ArxModel(Model):
         if n < 4 * (self.t0 + 1) + 10:
             raise ValueError(f"U: {n} samples are too few for orders {self.narx}")
 
-    def _fit(self, U, Y):
+    def _fit(self, U, Y, bounds=None):
         self._check_length(U.shape[0])
         self.n_inputs_, self.n_outputs_ = U.shape[1], Y.shape[1]
         self.feature_scale_ = physics_features(U)[1] if self.features == "physics" else None
-        R = arx_design(self._features(U), Y, self.orders)
+        F = self._features(U)
+        # one design per segment (records laid end to end): no regressor crosses a seam
+        parts = [(a, b) for a, b in (bounds or [(0, U.shape[0])]) if b - a > self.t0]
+        if not parts:
+            raise ValueError(f"segments: none is longer than t0 = {self.t0} samples")
+        R = np.vstack([arx_design(F[a:b], Y[a:b], self.orders) for a, b in parts])
+        T = np.vstack([Y[a + self.t0:b] for a, b in parts])
         A = np.c_[R, np.ones(len(R))]
-        T = Y[self.t0:]
         self.coef_, *_ = np.linalg.lstsq(A, T, rcond=None)
         dof = max(len(A) - A.shape[1], 1)
         sigma2 = np.sum((T - A @ self.coef_) ** 2, axis=0) / dof

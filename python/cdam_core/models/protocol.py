@@ -97,13 +97,25 @@ class Model(ABC):
             raise ValueError(f"{type(self).__name__}: not fitted; call fit(U, Y) first")
 
     # -- the protocol ------------------------------------------------------------------------
-    def fit(self, U, Y):
-        """Fit on inputs U (N, i) and outputs Y (N, m); returns self."""
+    #: True for a kind whose ``_fit(U, Y, bounds)`` takes records laid end to end
+    fits_segments: ClassVar[bool] = False
+
+    def fit(self, U, Y, segments=None):
+        """Fit on inputs U (N, i) and outputs Y (N, m); returns self. ``segments`` as for
+        ``predict``: no regressor crosses a seam (kinds with ``fits_segments``; others take
+        one record)."""
         U = as_2d(U, "U")
         Y = as_2d(Y, "Y")
         if U.shape[0] != Y.shape[0]:
             raise ValueError(f"U, Y: mismatched sample counts ({U.shape[0]} and {Y.shape[0]})")
-        self._fit(U, Y)
+        bounds = segment_bounds(segments, U.shape[0])
+        if len(bounds) == 1:
+            self._fit(U, Y)
+        elif not self.fits_segments:
+            raise ValueError(f"segments: a {self.kind or type(self).__name__} model is fitted "
+                             f"on one record; join the records or fit an arx model")
+        else:
+            self._fit(U, Y, bounds)
         return self
 
     def predict(self, U, Y=None, mode: str = "one_step", k: int = 1, segments=None) -> np.ndarray:
