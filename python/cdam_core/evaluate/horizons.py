@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from cdam_core.base.metrics import output_metrics
+from cdam_core.evaluate.groups import Group, group_errors
 from cdam_core.models.protocol import Model, segment_bounds
 
 __all__ = ["HorizonScores", "score_horizons", "default_horizons"]
@@ -39,23 +40,60 @@ class HorizonScores:
     mae: dict[str, np.ndarray] = field(default_factory=dict)    # predictor -> (H, m)
     free_run: dict[str, dict] = field(default_factory=dict)     # predictor -> output metrics
     rows: list[int] = field(default_factory=list)               # scored rows per horizon
+    groups: list[Group] = field(default_factory=list)
+    group_rmse: dict[str, np.ndarray] = field(default_factory=dict)  # predictor -> (H, G)
+    group_mae: dict[str, np.ndarray] = field(default_factory=dict)   # predictor -> (H, G)
+
+    def group_mae_sum(self, name: str, upto: int = 50):
+        """Sum over h = 1..upto of each group's MAE (None unless every such h was scored)."""
+        if not set(range(1, upto + 1)) <= set(self.horizons):
+            return None
+        rows = [self.horizons.index(h) for h in range(1, upto + 1)]
+        return self.group_mae[name][rows].sum(axis=0)
+
+    def add(self, other: "HorizonScores", name: str, as_name: str) -> None:
+        """Take predictor ``name`` of ``other`` (same outputs, horizons, rows) as ``as_name``."""
+        if other.horizons != self.horizons or other.outputs != self.outputs or \
+                other.rows != self.rows:
+            raise ValueError("other: scored on different outputs, horizons or rows")
+        for mine, theirs in ((self.rmse, other.rmse), (self.mae, other.mae),
+                             (self.group_rmse, other.group_rmse),
+                             (self.group_mae, other.group_mae),
+                             (self.free_run, other.free_run)):
+            if name in theirs:
+                mine[as_name] = theirs[name]
 
     def to_json(self) -> dict:
-        return {"outputs": self.outputs, "horizons": self.horizons, "rows": self.rows,
-                "rmse": {k: {o: v[:, j].tolist() for j, o in enumerate(self.outputs)}
-                         for k, v in self.rmse.items()},
-                "mae": {k: {o: v[:, j].tolist() for j, o in enumerate(self.outputs)}
-                        for k, v in self.mae.items()},
-                "free_run": self.free_run}
+        def per(d, names):
+            return {k: {o: v[:, j].tolist() for j, o in enumerate(names)} for k, v in d.items()}
+        js = {"outputs": self.outputs, "horizons": self.horizons, "rows": self.rows,
+              "rmse": per(self.rmse, self.outputs), "mae": per(self.mae, self.outputs),
+              "free_run": self.free_run}
+        if self.groups:
+            names = [g.name for g in self.groups]
+            sums = {k: self.group_mae_sum(k) for k in self.group_mae}
+            js["groups"] = {g.name: g.to_json() for g in self.groups}
+            js["group_rmse"] = per(self.group_rmse, names)
+            js["group_mae"] = per(self.group_mae, names)
+            js["group_mae_sum_1_50"] = {k: None if v is None else dict(zip(names, v.tolist()))
+                                        for k, v in sums.items()}
+        return js
 
 
 def score_horizons(model: Model, U, Y, outputs, horizons, segments=None,
-                   free_run: bool = True, progress=None) -> HorizonScores:
+                   free_run: bool = True, progress=None, groups=(),
+                   on_prediction=None) -> HorizonScores:
     """Score ``model`` and the naive predictor at every horizon (see the module doc)."""
     Y = np.asarray(Y, dtype=float)
     bounds = segment_bounds(segments, len(Y))
     start = max(model.t0, 1)
-    out = HorizonScores(list(outputs), [int(h) for h in horizons])
+    out = HorizonScores(list(outputs), [int(h) for h in horizons], groups=list(groups))
+    outputs = list(outputs)
+    for g in out.groups:
+        for c in g.columns:
+            if c not in outputs:
+                raise ValueError(f"groups: {g.name}: {c!r} is not an output")
+    grm, grn, gam, gan = [], [], [], []
     if not out.horizons:
         raise ValueError("horizons: empty")
     rm, rn, am, an = [], [], [], []
@@ -76,11 +114,21 @@ def score_horizons(model: Model, U, Y, outputs, horizons, segments=None,
         rn.append(np.sqrt(np.mean(N ** 2, axis=0)))
         am.append(np.mean(np.abs(E), axis=0))
         an.append(np.mean(np.abs(N), axis=0))
+        if out.groups:
+            for P_, r_, a_ in ((P[idx], grm, gam), (Y[idx - h], grn, gan)):
+                G = group_errors(Y[idx], P_, outputs, out.groups)
+                r_.append(np.sqrt(np.mean(G ** 2, axis=0)))
+                a_.append(np.mean(G, axis=0))
+        if on_prediction is not None:
+            on_prediction(h, idx, P[idx])
         out.rows.append(int(idx.size))
         if progress is not None:
             progress(i + 1, len(out.horizons))
     out.rmse = {"model": np.array(rm), "naive": np.array(rn)}
     out.mae = {"model": np.array(am), "naive": np.array(an)}
+    if out.groups:
+        out.group_rmse = {"model": np.array(grm), "naive": np.array(grn)}
+        out.group_mae = {"model": np.array(gam), "naive": np.array(gan)}
     if free_run and model.dynamic:
         P = model.predict(U, Y, mode="free_run", segments=segments)
         keep = np.zeros(len(Y), bool)

@@ -35,6 +35,8 @@ NAN_POLICIES = ("error", "split")
 def _entry(name, spec, where) -> tuple[str, float]:
     if not isinstance(name, str) or not name.strip():
         raise ValueError(f"{where}: empty name in {name!r}={spec!r}")
+    if isinstance(spec, tuple) and len(spec) == 2:      # already parsed: (column, factor)
+        spec = spec[0] if spec[1] == 1 else f"{spec[0]}*{spec[1]!r}"
     if not isinstance(spec, str) or not spec.strip():
         raise ValueError(f"{where}: {name}: expected a column name, got {spec!r}")
     col, star, factor = spec.partition("*")
