@@ -146,3 +146,22 @@ def test_map_brings_a_record_with_its_own_names(tmp_path):
     pa_, pb = (pd.read_parquet(tmp_path / f"{r}.p.parquet") for r in ("r.csv", "own.parquet"))
     assert "pos_x_mm" in pb.columns and "x" not in pb.columns
     np.testing.assert_allclose(pb["pos_x_mm"].to_numpy(), pa_["x"].to_numpy() * 1000, rtol=1e-9)
+
+
+def test_rollout_equals_k_step_prediction_on_segments():
+    rng = np.random.default_rng(5)
+    U, Y = rng.standard_normal((300, 2)), np.cumsum(rng.standard_normal((300, 3)), axis=0)
+    m = ArxModel((3, 2, 2)).fit(U, Y)
+    segs = [150, 90, 60]
+    got = {}
+    for k, rows, P in m.rollout(U, Y, 12, segments=segs, first=4):
+        got.setdefault(k, []).append((rows, P))
+    assert sorted(got) == list(range(1, 13))
+    for k, parts in got.items():
+        rows = np.concatenate([r for r, _ in parts])
+        P = np.vstack([p for _, p in parts])
+        want = m.predict(U, Y, mode="k_step", k=k, segments=segs)
+        starts = [0, 150, 240]
+        expect = np.concatenate([np.arange(a + 4 + k - 1, a + n) for a, n in zip(starts, segs)])
+        assert np.array_equal(np.sort(rows), expect)
+        np.testing.assert_allclose(P, want[rows], rtol=1e-12, atol=1e-12)

@@ -56,6 +56,13 @@ def test_the_diverging_estimate_of_multisine_run4_is_left_out():
     assert len(div) == 1 and div[0]["t_stop"] == pytest.approx(64.89)
     assert 63.0 < div[0]["t_start"] < 63.5
     assert ds.t[-1] < div[0]["t_start"]
+    glitch = [e for e in ds.meta["excluded"] if e["reason"] == "implausible motor speed"]
+    raw = pd.read_parquet(MULTISINE4)
+    w = raw[[f"m{k}_erpm" for k in range(1, 5)]].to_numpy() * np.pi / 180
+    bad_t = raw["t"].to_numpy()[np.any(w > 4400, axis=1)]          # the 33,036 rad/s readings
+    assert bad_t.size == 3 and [(g["t_start"], g["t_stop"]) for g in glitch] == \
+        [(bad_t[0], bad_t[-1])]
+    assert ds.column("w1").max() < 3000
 
 
 def _flight(n=600, dt=0.01, drift=None):
@@ -70,8 +77,8 @@ def _flight(n=600, dt=0.01, drift=None):
         p[a:b, 0] += rate * (t[a:b] - t[a])
         p[b:, 0] += rate * (t[b - 1] - t[a])
     p[:20, 2] = 0.05                               # resting on the floor, then takeoff
-    cols = ["x", "y", "z", "vx", "vy", "vz", "is_armed", "is_flying"]
-    data = np.column_stack([p, v, np.ones(n), np.ones(n)])
+    cols = ["x", "y", "z", "vx", "vy", "vz", "is_armed", "is_flying"] + INPUTS
+    data = np.column_stack([p, v, np.ones(n), np.ones(n), np.full((n, 4), 1500.0)])
     return Dataset(t=t, columns=cols, data=data)
 
 
@@ -85,6 +92,11 @@ def test_exclusion_rules_on_synthetic_flights():
     assert drop[300:380].all() and not drop[450:].any()
     drop, spans = flight_exclusions(_flight(drift=(300, 320, 1.0)))
     assert not drop[20:].any()
+    glitch = _flight()
+    glitch.data[200, glitch.columns.index("w3")] = 33000.0       # a telemetry glitch
+    drop, spans = flight_exclusions(glitch)
+    assert np.flatnonzero(drop[20:]).tolist() == [180]
+    assert spans[-1]["reason"] == "implausible motor speed"
 
 
 def _csv(path, n, seed):

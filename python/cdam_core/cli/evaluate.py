@@ -91,7 +91,7 @@ def run(args) -> int:
 
     def progress(i, n):
         if not args.quiet and sys.stderr.isatty():
-            print(f"\rcdam evaluate: horizon {i}/{n}", end="" if i < n else "\n", file=sys.stderr)
+            print(f"\rcdam evaluate: {i}/{n} samples", end="" if i < n else "\n", file=sys.stderr)
 
     collected = []
     scores = score_horizons(mf.model, U, Y, mf.outputs, horizons, segments=lengths,

@@ -82,53 +82,63 @@ class HorizonScores:
 
 def score_horizons(model: Model, U, Y, outputs, horizons, segments=None,
                    free_run: bool = True, progress=None, groups=(),
-                   on_prediction=None) -> HorizonScores:
-    """Score ``model`` and the naive predictor at every horizon (see the module doc)."""
+                   on_prediction=None, first: int = 1) -> HorizonScores:
+    """Score ``model`` and the naive predictor at every horizon (see the module doc).
+    ``first``: score from at least this row of each segment as well (the largest t0 of the
+    models compared, so that they are all scored on the same rows)."""
     Y = np.asarray(Y, dtype=float)
     bounds = segment_bounds(segments, len(Y))
-    start = max(model.t0, 1)
+    start = max(model.t0, 1, int(first))
     out = HorizonScores(list(outputs), [int(h) for h in horizons], groups=list(groups))
     outputs = list(outputs)
     for g in out.groups:
         for c in g.columns:
             if c not in outputs:
                 raise ValueError(f"groups: {g.name}: {c!r} is not an output")
-    grm, grn, gam, gan = [], [], [], []
     if not out.horizons:
         raise ValueError("horizons: empty")
-    rm, rn, am, an = [], [], [], []
     for i, h in enumerate(out.horizons):
         if h < 1:
             raise ValueError(f"horizons[{i}]: must be >= 1, got {h}")
-        keep = np.zeros(len(Y), bool)
-        for a, b in bounds:
-            keep[a + start + h - 1:b] = True
-        if not keep.any():
-            raise ValueError(f"horizons: {h} samples is longer than every record")
-        P = model.predict(U, Y, mode="one_step" if h == 1 else "k_step", k=h, segments=segments)
-        if not np.all(np.isfinite(P[keep])):
+    H, G, m = max(out.horizons), len(out.groups), Y.shape[1]
+    want = set(out.horizons)
+    # per horizon: rows, then sums of squared and absolute errors (model, naive) per output
+    # and per group; the rollout gives every horizon in one pass, possibly in chunks
+    acc = {h: [0, np.zeros((2, m)), np.zeros((2, m)), np.zeros((2, G)), np.zeros((2, G))]
+           for h in want}
+    done = 0
+    for h, idx, P in model.rollout(U, Y, H, segments=segments, first=start):
+        if h not in want:
+            continue
+        if not np.all(np.isfinite(P)):
             raise ValueError(f"model: the {h}-step prediction diverged (NaN or Inf)")
-        idx = np.flatnonzero(keep)
-        E, N = P[idx] - Y[idx], Y[idx - h] - Y[idx]
-        rm.append(np.sqrt(np.mean(E ** 2, axis=0)))
-        rn.append(np.sqrt(np.mean(N ** 2, axis=0)))
-        am.append(np.mean(np.abs(E), axis=0))
-        an.append(np.mean(np.abs(N), axis=0))
-        if out.groups:
-            for P_, r_, a_ in ((P[idx], grm, gam), (Y[idx - h], grn, gan)):
-                G = group_errors(Y[idx], P_, outputs, out.groups)
-                r_.append(np.sqrt(np.mean(G ** 2, axis=0)))
-                a_.append(np.mean(G, axis=0))
+        a_ = acc[h]
+        a_[0] += idx.size
+        for j, Q in enumerate((P, Y[idx - h])):
+            E = Q - Y[idx]
+            a_[1][j] += np.sum(E ** 2, axis=0)
+            a_[2][j] += np.sum(np.abs(E), axis=0)
+            if G:
+                Ge = group_errors(Y[idx], Q, outputs, out.groups)
+                a_[3][j] += np.sum(Ge ** 2, axis=0)
+                a_[4][j] += np.sum(Ge, axis=0)
         if on_prediction is not None:
-            on_prediction(h, idx, P[idx])
-        out.rows.append(int(idx.size))
-        if progress is not None:
-            progress(i + 1, len(out.horizons))
-    out.rmse = {"model": np.array(rm), "naive": np.array(rn)}
-    out.mae = {"model": np.array(am), "naive": np.array(an)}
+            on_prediction(h, idx, P)
+        if progress is not None and h == H:
+            done = min(done + idx.size, len(Y))
+            progress(done, len(Y))
+    for h in out.horizons:
+        if acc[h][0] == 0:
+            raise ValueError(f"horizons: {h} samples is longer than every record")
+    out.rows = [int(acc[h][0]) for h in out.horizons]
+    stats = {}
+    for k, key in ((1, "rmse"), (2, "mae"), (3, "group_rmse"), (4, "group_mae")):
+        for j, name in enumerate(("model", "naive")):
+            v = np.array([acc[h][k][j] / acc[h][0] for h in out.horizons])
+            stats.setdefault(key, {})[name] = np.sqrt(v) if key.endswith("rmse") else v
+    out.rmse, out.mae = stats["rmse"], stats["mae"]
     if out.groups:
-        out.group_rmse = {"model": np.array(grm), "naive": np.array(grn)}
-        out.group_mae = {"model": np.array(gam), "naive": np.array(gan)}
+        out.group_rmse, out.group_mae = stats["group_rmse"], stats["group_mae"]
     if free_run and model.dynamic:
         P = model.predict(U, Y, mode="free_run", segments=segments)
         keep = np.zeros(len(Y), bool)

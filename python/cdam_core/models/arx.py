@@ -121,6 +121,18 @@ class ArxModel(Model):
         return lagged(Y, na, 1, self.t0) @ self.coef_[:na * self.n_outputs_] + \
             self._input_term(self._features(U))
 
+    def _windows_one_step(self, u, z, W, t0):
+        """The last row of each of W stacked windows of t0 + 1 rows, from that row's regressor
+        alone (the protocol's default computes every row of every window)."""
+        if type(self)._input_term is not ArxModel._input_term:   # HybridNarx adds a network
+            return super()._windows_one_step(u, z, W, t0)
+        na, nb, nk = self.orders
+        z3 = z.reshape(W, t0 + 1, -1)
+        f3 = self._features(u).reshape(W, t0 + 1, -1)
+        R = np.hstack([z3[:, t0 - 1 - j] for j in range(na)] +
+                      [f3[:, t0 - nk - j] for j in range(nb)] + [np.ones((W, 1))])
+        return R @ self.coef_
+
     def _free_run(self, U, Y0):
         na, t0, m = self.orders.na, self.t0, self.n_outputs_
         term = self._input_term(self._features(U))

@@ -58,15 +58,20 @@ def stack_records(paths, inputs=None, outputs=None, *, mapping=None, nan: str = 
                   loader: str = "dataset") -> Stack:
     """Read every record of ``paths`` and stack them (module doc). ``inputs``/``outputs``:
     the columns (after the map); default the first record's selection, which every other
-    record must then have. ValueError naming the record on any problem."""
-    paths = [Path(p) for p in paths]
+    record must then have. An item of ``paths`` may be a Dataset already loaded (named by its
+    ``meta["path"]``). ValueError naming the record on any problem."""
+    paths = [p if isinstance(p, Dataset) else Path(p) for p in paths]
     if not paths:
         raise ValueError("paths: no record given")
     sets, names = [], []
-    for p in paths:
-        ds = _load(p, inputs, outputs, mapping, nan, loader)
-        if inputs is None or outputs is None:
-            inputs, outputs = inputs or ds.inputs, outputs or ds.outputs
+    for k, p in enumerate(paths):
+        if isinstance(p, Dataset):
+            ds, p = p, p.meta.get("path", f"record {k}")
+        else:
+            ds = _load(p, inputs, outputs, mapping, nan, loader)
+        if k == 0:     # the first record's selection (names, or text resolved by it)
+            inputs = ds.inputs if inputs is None or isinstance(inputs, str) else list(inputs)
+            outputs = ds.outputs if outputs is None or isinstance(outputs, str) else list(outputs)
         if not inputs or not outputs:
             raise ValueError(f"{p}: no input or output columns selected")
         for c in list(inputs) + list(outputs):

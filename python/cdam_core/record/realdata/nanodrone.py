@@ -17,6 +17,10 @@ into segments there, so nothing trains or scores across them). Every rule is a p
 kinematic fact with its threshold in physical units, the same for every record:
 
 - **NaN motor speed**: a real telemetry gap; the row is dropped (never filled in).
+- **implausible motor speed**: a reading below 0 or above ``MAX_MOTOR_SPEED`` = 4,400 rad/s,
+  the no-load speed of the vehicle's 10,000 rpm/V motors on a full 1S battery (4.2 V); the
+  flights reach about 2,500 rad/s, and the five telemetry glitches in them read 33,000 and
+  105,000 rad/s (multisine runs 1 and 4): corrupted telemetry, not a rotor.
 - **not flying (flags)**: ``is_armed`` false, ``is_flying`` false or ``is_tumbled`` true.
 - **ground contact** (takeoff, landing, crash): height within ``GROUND_MARGIN`` = 0.05 m (about
   one rotor diameter) of the record's lowest height (the vehicle resting on the floor). Within
@@ -32,9 +36,10 @@ kinematic fact with its threshold in physical units, the same for every record:
   landing) are left out with them: no 50-step prediction fits in them.
 
 On the 17 flights these rules leave out takeoff and landing of every flight, the crash and
-ground time of square run 1 (flags and ground), and one diverging estimate: the last 1.3 s of
-multisine run 4 (where the vehicle hits the floor and the position keeps drifting with idle
-motors); ``cdam_core.record.realdata.nanodrone.exclusion_report`` prints them.
+ground time of square run 1 (flags and ground), five motor-telemetry glitches, and one
+diverging estimate: the last 1.5 s of multisine run 4 (where the vehicle hits the floor and the
+position keeps drifting with idle motors); ``python -m cdam_core.record.realdata.nanodrone``
+prints them.
 """
 from __future__ import annotations
 
@@ -60,6 +65,7 @@ GROUND_MARGIN = 0.05        # m, about one rotor diameter
 CONSISTENCY_WINDOW = 0.25   # s
 CONSISTENCY_LIMIT = 0.5     # m/s
 SUSTAINED = 0.5             # s, the benchmark's horizon
+MAX_MOTOR_SPEED = 4400.0    # rad/s: 10,000 rpm/V x 4.2 V no-load
 
 UNITS = {**{w: "rad/s" for w in INPUTS}, "x": "m", "y": "m", "z": "m", "vx": "m/s",
          "vy": "m/s", "vz": "m/s", "qx": "1", "qy": "1", "qz": "1", "qw": "1",
@@ -108,6 +114,13 @@ def _diverging(t, pos, vel) -> np.ndarray:
     return out
 
 
+def _implausible(ds: Dataset) -> np.ndarray:
+    if not all(w in ds.columns for w in INPUTS):
+        return np.zeros(len(ds), bool)
+    w = ds.select(INPUTS)
+    return np.any((w < 0) | (w > MAX_MOTOR_SPEED), axis=1)
+
+
 def flight_exclusions(ds: Dataset) -> tuple[np.ndarray, list[dict]]:
     """(rows to leave out, bool (N,); [{"reason", "t_start", "t_stop", "samples"}]) of a
     loaded flight (flags, ground contact, diverging estimate; module doc)."""
@@ -119,6 +132,7 @@ def flight_exclusions(ds: Dataset) -> tuple[np.ndarray, list[dict]]:
             (flags["is_flying"] < 0.5 if "is_flying" in flags else False) |
             (flags["is_tumbled"] > 0.5 if "is_tumbled" in flags else False)) &
         np.ones(len(t), bool),
+        "implausible motor speed": _implausible(ds),
         "ground contact": ds.column("z") < ds.column("z").min() + GROUND_MARGIN,
         "diverging state estimate": _diverging(t, ds.select(["x", "y", "z"]),
                                                ds.select(["vx", "vy", "vz"])),
@@ -166,7 +180,7 @@ def load_nanodrone(path, exclude: bool = True) -> Dataset:
         "source": f"nano-drone benchmark flight {path.name} (idsia-robotics/"
                   f"nanodrone-sysid-benchmark; Busetto et al., Control Eng. Practice 172 (2026) "
                   f"106871)",
-        "rate": 100.0, "units": {c: UNITS[c] for c in keep if c in UNITS},
+        "path": str(path), "rate": 100.0, "units": {c: UNITS[c] for c in keep if c in UNITS},
         "trajectory": trajectory_type(path),
         "conversion": "w_i = m{i}_erpm * 2 pi / 360 (rad/s)",
         "excluded": sorted(excluded, key=lambda e: e["t_start"]),
