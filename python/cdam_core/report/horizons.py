@@ -93,3 +93,26 @@ def _panels(path, x, dt, series: dict, ylabels: list[str]) -> None:
     with atomic_target(path) as tmp:
         fig.savefig(tmp, dpi=110)
     plt.close(fig)
+
+
+def published_table() -> str:
+    """Markdown: the nano-drone benchmark's published MAE table and the quoted RMSE re-run
+    (``evaluate.published``), for printing beside ours."""
+    from cdam_core.evaluate.published import (GROUPS, NANODRONE_PUBLISHED,
+                                              NANODRONE_RERUN_RMSE_H50, NANODRONE_SOURCE)
+    units = [GROUP_UNITS[g] for g in GROUPS]
+    lines = [f"Published (benchmark test type, not among our flights; {NANODRONE_SOURCE}): MAE "
+             f"at h = 50 (sum over h = 1..50)", "",
+             "| model | " + " | ".join(f"{g} [{u}]" for g, u in zip(GROUPS, units)) + " |",
+             "|" + "---|" * (len(GROUPS) + 1)]
+    for name, row in NANODRONE_PUBLISHED.items():
+        lines.append(f"| {name} | " + " | ".join(f"{row[g][0]:.3f} ({row[g][1]:.2f})"
+                                                for g in GROUPS) + " |")
+    lines += ["", "RMSE at h = 50 on that test type, as quoted in issue [flights] (re-run of the "
+              "published weights, and a least-squares ARX(1) on the 17 flights):", "",
+              "| model | " + " | ".join(GROUPS) + " |", "|" + "---|" * (len(GROUPS) + 1)]
+    for name, row in NANODRONE_RERUN_RMSE_H50.items():
+        cells = [f"{v[0]:.3f}-{v[1]:.3f}" if isinstance(v, tuple) else f"{v:.3f}"
+                 for v in (row[g] for g in GROUPS)]
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
