@@ -80,6 +80,26 @@ class HorizonScores:
         return js
 
 
+def _one_blas_thread():
+    """The rollout multiplies many small matrices: BLAS threads only contend for the cores
+    (2-3x slower on a busy 2-core machine), so they are limited to one where threadpoolctl
+    (a scikit-learn dependency) is installed."""
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:                 # pragma: no cover
+        from contextlib import nullcontext
+        return nullcontext()
+    return threadpool_limits(1, user_api="blas")
+
+
+def _scored(rollout, want):
+    """The rollout's horizons in ``want``, computed with one BLAS thread."""
+    with _one_blas_thread():
+        for h, idx, P in rollout:
+            if h in want:
+                yield h, idx, P
+
+
 def score_horizons(model: Model, U, Y, outputs, horizons, segments=None,
                    free_run: bool = True, progress=None, groups=(),
                    on_prediction=None, first: int = 1) -> HorizonScores:
@@ -107,9 +127,7 @@ def score_horizons(model: Model, U, Y, outputs, horizons, segments=None,
     acc = {h: [0, np.zeros((2, m)), np.zeros((2, m)), np.zeros((2, G)), np.zeros((2, G))]
            for h in want}
     done = 0
-    for h, idx, P in model.rollout(U, Y, H, segments=segments, first=start):
-        if h not in want:
-            continue
+    for h, idx, P in _scored(model.rollout(U, Y, H, segments=segments, first=start), want):
         if not np.all(np.isfinite(P)):
             raise ValueError(f"model: the {h}-step prediction diverged (NaN or Inf)")
         a_ = acc[h]

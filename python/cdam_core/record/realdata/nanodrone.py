@@ -31,7 +31,10 @@ kinematic fact with its threshold in physical units, the same for every record:
   disagreement above ``CONSISTENCY_LIMIT`` = 0.5 m/s (12.5 cm in 0.25 s, far above the
   motion-capture and filter noise) sustained for at least ``SUSTAINED`` = 0.5 s (the benchmark's
   50-step horizon; shorter spikes are the filter's lag at sharp turns) marks a divergence;
-  its windows are left out.
+  its windows are left out. The rule is not fitted to the flight it finds: with the limit
+  anywhere in 0.25-1.0 m/s at 0.5 s, or the duration anywhere in 0.25-1.0 s at 0.5 m/s, the
+  flight flagged is multisine run 4 (halving the limit adds multisine run 2 and random1 run 2;
+  halving the duration adds the 0.25 s crash spike of square run 1, already on the ground).
 - Kept pieces shorter than ``SUSTAINED`` between two flight-state exclusions (bounces on
   landing) are left out with them: no 50-step prediction fits in them.
 
