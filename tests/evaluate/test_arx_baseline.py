@@ -52,3 +52,33 @@ def test_cross_trajectory_fold_on_the_flights():
     h50 = sc.horizons.index(50)
     # a linear model beats holding the state at 0.5 s on every group of the square flights
     assert np.all(sc.group_rmse["arx1"][h50] < sc.group_rmse["naive"][h50])
+
+
+def test_evaluate_with_the_arx_baseline(tmp_path, capsys):
+    """`cdam evaluate --baselines`: the ARX baseline chosen on training records holds the
+    generating lags and is scored beside the model and the naive predictor."""
+    import json
+
+    from cdam_core.cli.main import main
+    from cdam_core.models import ArxModel, save_model
+    from cdam_core.record.dataset import write_dataset
+    paths = []
+    for k, n in enumerate((400, 300, 300, 250)):
+        paths.append(tmp_path / f"r{k}.{'csv' if k % 2 else 'parquet'}")
+        write_dataset(paths[-1], _record(n, k + 1))
+    st = stack_records(paths[:1])
+    save_model(tmp_path / "m.json", ArxModel((1, 1, 1)).fit(st.U, st.Y),
+               inputs=["u"], outputs=["y1", "y2"])
+    argv = ["evaluate", str(tmp_path / "m.json"), str(paths[3]), "--horizon", "20", "--json",
+            str(tmp_path / "e.json"), "--quiet", "--baselines"]
+    assert main(argv + [str(p) for p in paths[:3]]) == 0
+    js = json.loads((tmp_path / "e.json").read_text())
+    na, nb, nk = js["baselines"]["arx"]["narx"]     # y(t-1), y(t-2) and u(t-2) among its lags
+    assert na >= 2 and nk <= 2 <= nk + nb - 1
+    assert js["baselines"]["arx"]["validation"] == str(paths[2])
+    rm = js["rmse"]
+    assert set(rm) == {"model", "naive", "arx"}
+    # the generating structure beats the misspecified ARX(1,1,1) and holding the output
+    assert rm["arx"]["y1"][-1] < 0.5 * min(rm["model"]["y1"][-1], rm["naive"]["y1"][-1])
+    assert main(argv + [str(paths[0])]) == 2
+    assert "--baselines: needs at least two" in capsys.readouterr().err

@@ -37,6 +37,10 @@ def register(subparsers) -> None:
     p.add_argument("--predictions", default=None,
                    help="write every k-step prediction to this Parquet file (long format: "
                         "record, start row, start time, horizon, predicted outputs)")
+    p.add_argument("--baselines", nargs="+", default=None, metavar="TRAIN",
+                   help="also fit the ARX baseline on these training records (orders and delay "
+                        "chosen with the last one as validation, then refitted on all) and "
+                        "score it beside the model and the naive predictor, on the same rows")
     p.add_argument("--horizon", type=int, default=1,
                    help="largest horizon H in samples (every h in 1..H up to 50, about 30 "
                         "log-spaced above)")
@@ -53,11 +57,11 @@ def run(args) -> int:
     from cdam_core.evaluate.groups import NANODRONE_GROUPS, parse_groups
     from cdam_core.evaluate.horizons import default_horizons, score_horizons
     from cdam_core.models.file import read_model_file
-    from cdam_core.preprocess import smooth_pair
     from cdam_core.record.columns import parse_column_map
     from cdam_core.record.stack import stack_records
 
-    check_io(inputs=[("MODEL", args.model)] + [("RECORD", r) for r in args.records],
+    check_io(inputs=[("MODEL", args.model)] + [("RECORD", r) for r in args.records] +
+             [("--baselines", r) for r in args.baselines or []],
              files=[("--json", args.json), ("--predictions", args.predictions)],
              folders=[("--report", args.report)])
     horizons = default_horizons(args.horizon) if args.horizon >= 1 else None
@@ -74,11 +78,13 @@ def run(args) -> int:
         groups = []
     else:
         groups = parse_groups(args.groups, mf.outputs)
-    st = stack_records(args.records, inputs=mf.inputs, outputs=mf.outputs, mapping=mapping,
-                       nan=args.nan, loader=args.loader)
-    U, Y = st.U.copy(), st.Y.copy()
-    for a, b in st.pieces():           # smoothed as the model's training data, piece by piece
-        U[a:b], Y[a:b] = smooth_pair(st.U[a:b], st.Y[a:b], mf.smoothing_passes)
+    if args.baselines is not None and len(args.baselines) < 2:
+        raise CliError("--baselines: needs at least two training records (the last one "
+                       "validates the ARX orders)")
+    read = dict(inputs=mf.inputs, outputs=mf.outputs, mapping=mapping, nan=args.nan,
+                loader=args.loader)
+    st = stack_records(args.records, **read)
+    U, Y = _smoothed(st, mf.smoothing_passes)      # as the model's training data
     dts = [float(np.median(np.diff(ds.t))) for ds in st.datasets]
     model_dt = getattr(mf.model, "dt", None)
     for path, dt in zip(args.records, dts):
@@ -93,17 +99,26 @@ def run(args) -> int:
         if not args.quiet and sys.stderr.isatty():
             print(f"\rcdam evaluate: {i}/{n} samples", end="" if i < n else "\n", file=sys.stderr)
 
-    collected = []
+    collected, baseline, first = [], None, 1
+    if args.baselines:
+        baseline = _arx_baseline(args.baselines, read, mf.smoothing_passes, groups, horizons)
+        first = max(mf.model.t0, baseline[0].t0)
     scores = score_horizons(mf.model, U, Y, mf.outputs, horizons, segments=lengths,
                             free_run=not args.no_free_run, progress=progress, groups=groups,
                             on_prediction=(lambda h, idx, P: collected.append((h, idx, P)))
-                            if args.predictions else None)
+                            if args.predictions else None, first=first)
+    if baseline:
+        scores.add(score_horizons(baseline[0], U, Y, mf.outputs, horizons, segments=lengths,
+                                  free_run=not args.no_free_run, groups=groups, first=first),
+                   "model", "arx")
     js = {"model": {"path": str(args.model), "kind": mf.kind, "sha256": mf.sha256,
                     "inputs": mf.inputs, "outputs": mf.outputs},
           "records": [{"path": str(p), "samples": len(ds), "segments": len(ds.segments),
                        "excluded": ds.meta.get("excluded", [])}
                       for p, ds in zip(args.records, st.datasets)],
           "dt": dts[0], **scores.to_json()}
+    if baseline:
+        js["baselines"] = {"arx": baseline[1]}
     if args.predictions:
         from cdam_core.evaluate.predictions import write_predictions
         write_predictions(args.predictions, st, collected, mapping)
@@ -127,3 +142,29 @@ def run(args) -> int:
             print(f"free run ({name}): " + ", ".join(
                 f"{o} rmse {v['rmse']:.4g}" for o, v in fr.items()))
     return 0
+
+
+def _smoothed(st, passes):
+    """Inputs and outputs of a stack smoothed segment by segment."""
+    from cdam_core.preprocess import smooth_pair
+    U, Y = st.U.copy(), st.Y.copy()
+    for a, b in st.pieces():
+        U[a:b], Y[a:b] = smooth_pair(st.U[a:b], st.Y[a:b], passes)
+    return U, Y
+
+
+def _arx_baseline(paths, read, passes, groups, horizons):
+    """(ARX model, JSON) of the baseline: orders chosen with the last record as validation
+    (evaluate.baselines.select_arx), preprocessed as the model's training data."""
+    from dataclasses import replace
+
+    from cdam_core.evaluate.baselines import select_arx
+    from cdam_core.record.stack import stack_records
+    fit, valid = (stack_records(x, **read) for x in (paths[:-1], paths[-1:]))
+    fit, valid = (replace(st, U=u, Y=y) for st, (u, y) in
+                  ((fit, _smoothed(fit, passes)), (valid, _smoothed(valid, passes))))
+    sel = [h for h in (1, 10, 25, 50) if h <= horizons[-1]]
+    model, orders, val = select_arx(fit, valid, horizons=sel, groups=groups)
+    return model, {"kind": "arx", "narx": list(orders), "train": [str(p) for p in paths[:-1]],
+                   "validation": str(paths[-1]), "selection_horizons": sel,
+                   "validation_scores": {",".join(map(str, k)): v for k, v in val.items()}}
