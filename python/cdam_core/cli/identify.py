@@ -12,8 +12,17 @@ def register(subparsers) -> None:
         "identify", help="identify a BP/NARX model with IBOA, BOA, CABC or plain BP",
         description="Train on TRAIN.csv (dataset format), evaluate on a test record (--test, or "
                     "the last part of TRAIN with --split) and an optional validation record; "
-                    "compare algorithms over several seeds with a rank-sum test.")
-    p.add_argument("train", help="training record (dataset CSV)")
+                    "compare algorithms over several seeds with a rank-sum test. Several "
+                    "TRAIN records (or one cut into segments) are kept apart: each is smoothed "
+                    "on its own, and only a static network trains across them.")
+    p.add_argument("train", nargs="+", help="training record(s) (dataset CSV or Parquet)")
+    p.add_argument("--map", default=None,
+                   help="model names to record columns: name=column[*factor],... or a JSON file")
+    p.add_argument("--nan", default="error", choices=["error", "split"],
+                   help="a missing value is an error, or its row is left out and the record "
+                        "cut there (default: error)")
+    p.add_argument("--loader", default="dataset", choices=["dataset", "nanodrone"],
+                   help="nanodrone: the nano-drone benchmark's Parquet flights")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--test", help="test record (dataset CSV)")
     g.add_argument("--split", type=float, default=None,
@@ -48,26 +57,30 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    from cdam_core.record.dataset import read_dataset
+    from cdam_core.record.columns import parse_column_map
+    from cdam_core.record.stack import stack_records
     from cdam_core.evaluate import compare
     from cdam_core.identify import IdentifyConfig
 
-    check_io(inputs=[("TRAIN", args.train), ("--test", args.test), ("--validate", args.validate)],
+    check_io(inputs=[("TRAIN", t) for t in args.train] +
+             [("--test", args.test), ("--validate", args.validate)],
              files=[("--json", args.json), ("--save", args.save)],
              folders=[("--report", args.report)])
     if args.seeds < 1:
         raise CliError("--seeds: must be >= 1")
     if args.split is not None and not 0 < args.split < 1:
         raise CliError(f"--split: must be in (0, 1), got {args.split}")
-    train = read_dataset(args.train, inputs=args.inputs, outputs=args.outputs)
-    if not train.inputs or not train.outputs:
-        raise CliError(f"{args.train}: no input or output columns selected (use --inputs/--outputs)")
-    U, Y, t = train.select(train.inputs), train.select(train.outputs), train.t
-    records, times = {}, {}
+    mapping = parse_column_map(args.map, "--map")
+    read = dict(mapping=mapping, nan=args.nan, loader=args.loader)
+    train = stack_records(args.train, inputs=args.inputs, outputs=args.outputs, **read)
+    if len(train.lengths) > 1 and not args.test:
+        raise CliError("--split: needs one contiguous TRAIN record; give --test instead")
+    U, Y, t = train.U, train.Y, train.t
+    records, times, segs = {}, {}, {}
     if args.test:
-        te = read_dataset(args.test, inputs=train.inputs, outputs=train.outputs)
-        records["test"] = (te.select(train.inputs), te.select(train.outputs))
-        times["test"] = te.t
+        te = stack_records([args.test], inputs=train.inputs, outputs=train.outputs, **read)
+        records["test"] = (te.U, te.Y)
+        times["test"], segs["test"] = te.t, te.lengths
     else:
         frac = 0.5 if args.split is None else args.split
         n = int(round(len(t) * frac))
@@ -77,8 +90,9 @@ def run(args) -> int:
         times["test"] = t[n:]
         U, Y, t = U[:n], Y[:n], t[:n]
     if args.validate:
-        va = read_dataset(args.validate, inputs=train.inputs, outputs=train.outputs)
-        records["validation"] = (va.select(train.inputs), va.select(train.outputs))
+        va = stack_records([args.validate], inputs=train.inputs, outputs=train.outputs, **read)
+        records["validation"] = (va.U, va.Y)
+        segs["validation"] = va.lengths
         times["validation"] = va.t
     if args.model == "hybrid" and args.narx is None:
         raise CliError("--model hybrid: needs --narx na,nb,nk")
@@ -92,10 +106,13 @@ def run(args) -> int:
                          model=args.model, features=args.features)
     algos = ["iboa", "boa", "cabc", "bp"] if args.algo == "all" else [args.algo]
     comparison = compare(algos, U, Y, records=records, seeds=range(args.seeds), config=cfg,
-                         names=train.outputs, progress=show_progress(args))
+                         names=train.outputs, progress=show_progress(args),
+                         segments=train.lengths if args.test else None,
+                         record_segments={k: v for k, v in segs.items() if len(v) > 1})
     result, models = comparison.result, comparison.models
     result["inputs"] = train.inputs
-    result["train_file"] = str(args.train)
+    result["train_file"] = str(args.train[0]) if len(args.train) == 1 else \
+        [str(x) for x in args.train]
     from cdam_core.evaluate.baselines import naive_and_arx
     from cdam_core.report.identify import headline
     result["baselines"] = naive_and_arx(U, Y, records, train.outputs, narx=cfg.narx,
@@ -111,7 +128,7 @@ def run(args) -> int:
     if args.report:
         from cdam_core.report.identify import write_report
         md = write_report(comparison, args.report, records=records, times=times,
-                          title=f"Identification of {Path(args.train).name}")
+                          title=f"Identification of {', '.join(Path(x).name for x in args.train)}")
         note(args, f"report: {md}")
     if args.save:
         from cdam_core.models.file import save_model

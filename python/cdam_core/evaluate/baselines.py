@@ -1,22 +1,34 @@
-"""Baselines: what a model's scores must beat to mean anything.
+"""Baselines every comparison carries: persistence (naive), the references ``cdam identify``
+prints beside a model, and a least-squares MIMO ARX with chosen orders.
 
 ``persistence`` (``cdam paper``): predict y(t) by the last measured y(t - k). A model-free
 reference for the dynamic sections: one-step (k = 1) and k-step (k = the horizon
 in samples) predictions are only informative where they beat persistence, since at a high
 sampling rate consecutive samples of a smooth signal are almost perfectly correlated. Scored
 like the models: per segment, the first k rows dropped (no earlier sample), segments pooled.
+
+The ARX baseline (:func:`select_arx`): ``ArxModel`` (raw inputs, least squares) with orders
+and delay chosen on training records only: each candidate (na, nb, nk) is fitted on the
+training stack and scored on a validation stack (records held out of training) by the k-step
+error at a few horizons, relative to the naive predictor on the same rows (so every output or
+group weighs alike); the best is refitted on training and validation together. nk >= 1 by
+default: the state at t is predicted from inputs up to t - 1, as the nano-drone benchmark's
+protocol gives its models.
 """
 from __future__ import annotations
 
 import numpy as np
 
 from cdam_core.base.metrics import output_metrics
+from cdam_core.evaluate.horizons import score_horizons
 from cdam_core.evaluate.kstep import horizon_steps
 from cdam_core.evaluate.scores import evaluate
 from cdam_core.models.arx import ArxModel
 from cdam_core.preprocess import smooth_pair
 
-__all__ = ["persistence", "naive_and_arx"]
+__all__ = ["persistence", "naive_and_arx", "select_arx", "ARX_GRID"]
+
+ARX_GRID = tuple((na, nb, nk) for na in (1, 2, 3) for nb in (1, 2, 3) for nk in (1, 2))
 
 
 def persistence(segments, names, rate: float, horizons=()) -> tuple[dict, dict]:
@@ -73,3 +85,38 @@ def naive_and_arx(U, Y, records: dict, names, *, narx=None, smoothing_passes: in
             scores = {"error": str(exc)}
         out[name] = {"naive": naive, "arx": scores}
     return out
+
+
+def _relative_error(model, stack, horizons, groups) -> float:
+    """Mean over horizons (and groups, else outputs) of the model's MAE over the naive MAE."""
+    sc = score_horizons(model, stack.U, stack.Y, stack.outputs, horizons,
+                        segments=stack.lengths, free_run=False, groups=groups)
+    mae = sc.group_mae if groups else sc.mae
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = mae["model"] / mae["naive"]
+    return float(np.mean(np.where(np.isfinite(ratio), ratio, 1.0)))
+
+
+def select_arx(train, valid, grid=ARX_GRID, horizons=(1, 10, 25, 50), groups=()):
+    """The ARX baseline (module doc): (model refitted on ``train`` + ``valid``, chosen
+    (na, nb, nk), {candidate: validation score}). ``train``/``valid``: ``record.stack.Stack``s
+    of the same inputs and outputs."""
+    if train.inputs != valid.inputs or train.outputs != valid.outputs:
+        raise ValueError("valid: different inputs or outputs than train")
+    grid = [tuple(int(v) for v in g) for g in grid]
+    if not grid:
+        raise ValueError("grid: no candidate order")
+    scores = {}
+    for orders in grid:
+        try:
+            m = ArxModel(orders).fit(train.U, train.Y, segments=train.lengths)
+            scores[orders] = _relative_error(m, valid, horizons, groups)
+        except ValueError:          # a diverging candidate is no candidate
+            scores[orders] = float("inf")
+    best = min(grid, key=lambda g: (scores[g], g))
+    if not np.isfinite(scores[best]):
+        raise ValueError("grid: every candidate diverged on the validation records")
+    U = np.vstack([train.U, valid.U])
+    Y = np.vstack([train.Y, valid.Y])
+    model = ArxModel(best).fit(U, Y, segments=list(train.lengths) + list(valid.lengths))
+    return model, best, scores

@@ -15,7 +15,7 @@ from scipy import stats
 from cdam_core.base.metrics import adaptation_value
 from cdam_core.evaluate.scores import evaluate
 from cdam_core.identify.pipelines import ALGORITHMS, IdentifyConfig, identify, preprocess
-from cdam_core.models.protocol import Model
+from cdam_core.models.protocol import Model, segment_bounds
 
 __all__ = ["Comparison", "compare", "summarise", "rank_sum"]
 
@@ -38,7 +38,8 @@ def _progress(total, enabled, desc):
 
 
 def compare(algos, U, Y, *, records: dict | None = None, seeds=range(10), config=None,
-            names=None, progress: bool = False) -> Comparison:
+            names=None, progress: bool = False, segments=None,
+            record_segments: dict | None = None) -> Comparison:
     """Run every algorithm with every seed; evaluate on each record.
 
     Args:
@@ -48,6 +49,9 @@ def compare(algos, U, Y, *, records: dict | None = None, seeds=range(10), config
         seeds: the seeds (at least 1).
         names: output names for the metric tables.
         progress: show a tqdm bar on stderr.
+        segments: the training rows as records laid end to end (lengths or ranges): each is
+            smoothed on its own; only a static network (no NARX orders) trains across them.
+        record_segments: {record name: segments} of the evaluation records cut into segments.
 
     Returns a :class:`Comparison`.
     """
@@ -61,7 +65,13 @@ def compare(algos, U, Y, *, records: dict | None = None, seeds=range(10), config
     if not seeds:
         raise ValueError("seeds: need at least one seed")
     cfg = config or IdentifyConfig()
-    Us, Ys = preprocess(U, Y, cfg.smoothing_passes)
+    bounds = segment_bounds(segments, len(U))
+    if len(bounds) > 1 and (cfg.narx is not None or cfg.model != "bp"):
+        raise ValueError(f"segments: {len(bounds)} training segments; a NARX or hybrid network "
+                         f"trains on one contiguous record (a static network, or an arx model "
+                         f"through Model.fit(..., segments=), trains across them)")
+    parts = [preprocess(U[a:b], Y[a:b], cfg.smoothing_passes) for a, b in bounds]
+    Us, Ys = np.vstack([u for u, _ in parts]), np.vstack([y for _, y in parts])
     names = list(names) if names is not None else [f"y{k}" for k in range(Ys.shape[1])]
     records = dict(records or {})
     bar = _progress(len(algos) * len(seeds), progress, "identify")
@@ -71,7 +81,9 @@ def compare(algos, U, Y, *, records: dict | None = None, seeds=range(10), config
         runs, best = [], None
         for seed in seeds:
             run = identify(algo, Us, Ys, seed=seed, config=cfg, preprocessed=True)
-            metrics = {name: evaluate(run.model, Ur, Yr, names, smoothing_passes=cfg.smoothing_passes)
+            metrics = {name: evaluate(run.model, Ur, Yr, names,
+                                      smoothing_passes=cfg.smoothing_passes,
+                                      segments=(record_segments or {}).get(name))
                        for name, (Ur, Yr) in records.items()}
             runs.append({
                 "seed": seed, "fitness": run.fitness, "final_mse": run.final_mse,

@@ -14,14 +14,16 @@ def evaluate(model: Model, U, Y, names=None, *, smoothing_passes: int = 0, k: in
              segments=None) -> dict:
     """Per-output metrics of a fitted model of any kind on a record (U, Y).
 
-    The record is smoothed like the training data (``smoothing_passes``), and the metrics
+    The record is smoothed like the training data (``smoothing_passes``, each segment on its
+    own), and the metrics
     compare the back-normalised predictions with these preprocessed measurements (as the
     paper does). Returns {"one_step": {name: {r, rmse, nrmse, fit_percent}}}, and for dynamic
     models "free_run" and, with ``k``, "k_step"; the measured rows every segment starts from
     (t0, and t0 + k - 1 for k-step) are left out of the scores.
     """
-    U, Y = smooth_pair(U, Y, smoothing_passes)
     bounds = segment_bounds(segments, len(Y))
+    parts = [smooth_pair(U[a:b], Y[a:b], smoothing_passes) for a, b in bounds]  # per segment
+    U, Y = np.vstack([u for u, _ in parts]), np.vstack([y for _, y in parts])
     t0 = model.t0
     modes = [("one_step", 1)]
     if model.dynamic:

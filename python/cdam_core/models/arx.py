@@ -64,6 +64,7 @@ class ArxModel(Model):
     """Linear ARX (see the module doc): ``ArxModel(narx=(na, nb, nk), features="raw")``."""
 
     kind = "arx"
+    fits_segments = True
 
     def __init__(self, narx=(3, 3, 0), features: str = "raw"):
         self.narx = narx                   # as given (scikit-learn's clone relies on it)
@@ -100,15 +101,20 @@ class ArxModel(Model):
         if n < 4 * (self.t0 + 1) + 10:
             raise ValueError(f"U: {n} samples are too few for orders {tuple(self.orders)}")
 
-    def _fit(self, U, Y):
+    def _fit(self, U, Y, bounds=None):
         self._check_params()
         self._check_length(U.shape[0])
         self.y_start_ = Y.mean(axis=0)     # where predict(U) alone starts a free run
         self.n_inputs_, self.n_outputs_ = U.shape[1], Y.shape[1]
         self.feature_scale_ = physics_features(U)[1] if self.features == "physics" else None
-        R = arx_design(self._features(U), Y, self.orders)
+        F = self._features(U)
+        # one design per segment (records laid end to end): no regressor crosses a seam
+        parts = [(a, b) for a, b in (bounds or [(0, U.shape[0])]) if b - a > self.t0]
+        if not parts:
+            raise ValueError(f"segments: none is longer than t0 = {self.t0} samples")
+        R = np.vstack([arx_design(F[a:b], Y[a:b], self.orders) for a, b in parts])
+        T = np.vstack([Y[a + self.t0:b] for a, b in parts])
         A = np.c_[R, np.ones(len(R))]
-        T = Y[self.t0:]
         self.coef_, *_ = np.linalg.lstsq(A, T, rcond=None)
         dof = max(len(A) - A.shape[1], 1)
         sigma2 = np.sum((T - A @ self.coef_) ** 2, axis=0) / dof
@@ -125,6 +131,18 @@ class ArxModel(Model):
         na = self.orders.na
         return lagged(Y, na, 1, self.t0) @ self.coef_[:na * self.n_outputs_] + \
             self._input_term(self._features(U))
+
+    def _windows_one_step(self, u, z, W, t0):
+        """The last row of each of W stacked windows of t0 + 1 rows, from that row's regressor
+        alone (the protocol's default computes every row of every window)."""
+        if type(self)._input_term is not ArxModel._input_term:   # HybridNarx adds a network
+            return super()._windows_one_step(u, z, W, t0)
+        na, nb, nk = self.orders
+        z3 = z.reshape(W, t0 + 1, -1)
+        f3 = self._features(u).reshape(W, t0 + 1, -1)
+        R = np.hstack([z3[:, t0 - 1 - j] for j in range(na)] +
+                      [f3[:, t0 - nk - j] for j in range(nb)] + [np.ones((W, 1))])
+        return R @ self.coef_
 
     def _free_run(self, U, Y0):
         na, t0, m = self.orders.na, self.t0, self.n_outputs_

@@ -47,6 +47,7 @@ class HybridNarx(ArxModel):
     """
 
     kind = "hybrid"
+    fits_segments = False   # the residual network is trained on one record
 
     def __init__(self, narx=(3, 3, 0), features="raw", fit_residual=None, seed=0,
                  validation_fraction=0.2):

@@ -120,8 +120,13 @@ class Model(EstimatorParams, ABC):
             raise ValueError(f"{type(self).__name__}: not fitted; call fit(U, Y) first")
 
     # -- the protocol ------------------------------------------------------------------------
-    def fit(self, U, Y):
-        """Fit on inputs U (N, i) and outputs Y (N, m); returns self."""
+    #: True for a kind whose ``_fit(U, Y, bounds)`` takes records laid end to end
+    fits_segments: ClassVar[bool] = False
+
+    def fit(self, U, Y, segments=None):
+        """Fit on inputs U (N, i) and outputs Y (N, m); returns self. ``segments`` as for
+        ``predict``: no regressor crosses a seam (kinds with ``fits_segments``; others take
+        one record)."""
         U = as_2d(U, "U")
         if Y is None:
             raise ValueError("Y: the measured outputs are required (requires y to be passed, "
@@ -130,7 +135,14 @@ class Model(EstimatorParams, ABC):
         Y = as_2d(Y, "Y")
         if U.shape[0] != Y.shape[0]:
             raise ValueError(f"U, Y: mismatched sample counts ({U.shape[0]} and {Y.shape[0]})")
-        self._fit(U, Y)
+        bounds = segment_bounds(segments, U.shape[0])
+        if len(bounds) == 1:
+            self._fit(U, Y)
+        elif not self.fits_segments:
+            raise ValueError(f"segments: a {self.kind or type(self).__name__} model is fitted "
+                             f"on one record; join the records or fit an arx model")
+        else:
+            self._fit(U, Y, bounds)
         self._note_target(Y1)
         return self
 
@@ -175,6 +187,48 @@ class Model(EstimatorParams, ABC):
             else:
                 P[a:b] = self._k_step(u, y, k)
         return P
+
+    def rollout(self, U, Y, horizon: int, segments=None, first: int = 1):
+        """Every k-step prediction for k = 1..``horizon`` in one pass: yields (k, rows, P),
+        P (len(rows), m) predicting the rows ``rows`` from the measured outputs up to
+        rows - k (the origin) and the model's own predictions after, with the measured
+        inputs; equal to ``predict(mode="k_step", k=k)`` on those rows. Origins start at
+        row max(t0, 1, first) - 1 of each segment; a horizon may come in several chunks
+        (bounded memory), and the k steps of all origins run together."""
+        self._check_fitted()
+        horizon = positive_int(horizon, "horizon")
+        U, Y = as_2d(U, "U"), as_2d(Y, "Y")
+        bounds = segment_bounds(segments, U.shape[0])
+        start = max(self.t0, 1, int(first))
+        if not self.dynamic or type(self)._k_step is not Model._k_step:
+            for k in range(1, horizon + 1):   # static maps and kinds with their own k-step
+                P = self.predict(U, Y, mode="k_step", k=k, segments=segments) \
+                    if self.dynamic else self.predict(U)
+                rows = np.concatenate([np.arange(a + start + k - 1, b) for a, b in bounds])
+                if rows.size:
+                    yield k, rows, P[rows]
+            return
+        t0, m = self.t0, Y.shape[1]
+        width = t0 + horizon
+        origins = np.concatenate([np.arange(a + start - 1, b - 1) for a, b in bounds])
+        seg_end = np.concatenate([np.full(max(b - 1 - (a + start - 1), 0), b)
+                                  for a, b in bounds])
+        chunk = max(256, (1 << 22) // (width * (m + U.shape[1])))
+        offs = np.arange(width) - (t0 - 1)            # buffer column -> row offset from origin
+        for c in range(0, origins.size, chunk):
+            o, end = origins[c:c + chunk], seg_end[c:c + chunk]
+            idx = np.minimum(o[:, None] + offs[None, :], U.shape[0] - 1)
+            Ub, Zb = U[idx], Y[idx].copy()
+            for k in range(1, horizon + 1):
+                live = np.flatnonzero(o + k < end)
+                if not live.size:
+                    break
+                W = live.size
+                u = np.ascontiguousarray(Ub[live, k - 1:k + t0].reshape(W * (t0 + 1), -1))
+                z = np.ascontiguousarray(Zb[live, k - 1:k + t0].reshape(W * (t0 + 1), m))
+                P = self._windows_one_step(u, z, W, t0)
+                Zb[live, t0 - 1 + k] = P
+                yield k, o[live] + k, P
 
     def score(self, U, Y, mode: str = "one_step", k: int = 1, segments=None) -> float:
         """Coefficient of determination R^2 averaged over outputs (as scikit-learn), skipping

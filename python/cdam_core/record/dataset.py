@@ -1,18 +1,27 @@
-"""The dataset format: CSV with a header row, ``t`` first, and an optional JSON sidecar.
+"""The dataset format: a table with ``t`` first (CSV or Parquet), and an optional JSON sidecar.
 
 Format (issue "identification", section "The dataset format"):
 
 - ``FILE.csv``: a header row of column names, then one row per sample; the first column is ``t``
-  (seconds, strictly increasing); every cell a finite decimal number. Standard channel names
+  (seconds, strictly increasing); every cell a decimal number. Standard channel names
   for the aerial manipulator: inputs ``T, tau_phi, tau_theta, tau_psi, tau_m1, tau_m2``; outputs
   ``phi, theta, psi, X, Y, Z, q1, q2``; optional ``theta_m1, theta_m2`` (motor-side angle after
-  the gearbox, rad) and any other named columns. SI units (N, N m, rad, m).
-- ``FILE.json`` (optional, beside the CSV): metadata, e.g. ``rate`` (Hz), ``units`` (column ->
-  unit), ``source``, ``model`` (declared model), ``inputs``/``outputs`` (default selection) and
-  anything else a producer wants to keep (gaps, clock offsets, interpolation per column).
+  the gearbox, rad) and any other named columns. SI units (N, N m, rad, m). pandas' default
+  CSV (an unnamed index column first) and PlotJuggler's (``__time`` first) are read too.
+- ``FILE.parquet``: the same columns in Parquet (:mod:`cdam_core.record.parquet`); a pandas
+  DataFrame in and out: ``Dataset.from_dataframe`` / ``Dataset.to_dataframe``.
+- ``FILE.json`` (optional, beside the table): metadata, e.g. ``rate`` (Hz), ``units`` (column ->
+  unit), ``source``, ``model`` (declared model), ``inputs``/``outputs`` (default selection),
+  ``segments`` (row ranges a model never predicts across) and anything else a producer wants to
+  keep (gaps, clock offsets, interpolation per column).
+
+Missing values: an error by default (``nan="error"``), or the record cut into segments around
+them (``nan="split"``); a column map renames the record's columns for a model (``mapping=``,
+``--map``). Both: :mod:`cdam_core.record.columns`.
 
 Every error is a ValueError naming the file and, for the CSV, the line number (the header is
-line 1). Writing is atomic: a temporary file in the same folder, flushed, then renamed.
+line 1), for Parquet and DataFrames the row. Writing is atomic: a temporary file in the same
+folder, flushed, then renamed.
 """
 from __future__ import annotations
 
@@ -27,6 +36,9 @@ from typing import Any, Iterable, Sequence
 import numpy as np
 
 from cdam_core.base.jsonio import plain, write_text_atomic
+from cdam_core.record.columns import (NAN_POLICIES, apply_column_map, check_segments,
+                                      kept_segments, parse_column_map, split_missing)
+from cdam_core.record.parquet import frame_table, read_parquet_table, write_parquet_table
 
 __all__ = [
     "Dataset",
@@ -124,6 +136,8 @@ class Dataset:
             raise ValueError(f"data: NaN or Inf at sample {r}, column {self.columns[c]!r}")
         if not isinstance(self.meta, dict):
             raise ValueError("meta: expected a dict")
+        if self.meta.get("segments") is not None:
+            check_segments(self.meta["segments"], t.size, "meta.segments")
         self.t = t
         self.data = np.ascontiguousarray(data)
         self.input_names = self._resolve(self.input_names, "inputs", STANDARD_INPUTS)
@@ -142,6 +156,53 @@ class Dataset:
                 raise ValueError(
                     f"{key}: unknown column {n!r} (columns: {', '.join(self.columns)})")
         return names
+
+    # -- pandas ---------------------------------------------------------------------------
+    @classmethod
+    def from_dataframe(cls, df, inputs=None, outputs=None, *, meta: dict | None = None,
+                       mapping=None, nan: str = "error") -> "Dataset":
+        """A Dataset from a pandas DataFrame: time column ``t`` or ``__time`` (or the index so
+        named), numeric columns (booleans as 0/1); ``inputs``, ``outputs``, ``mapping`` and
+        ``nan`` as for :func:`read_dataset` (errors name the row). A non-numeric column is an
+        error unless ``nan="split"`` (then it is dropped and listed in
+        ``meta["dropped_columns"]``)."""
+        mapping = _prepare(nan, mapping)
+        names, arr, other = frame_table(df, "dataframe", drop_other=(nan == "split"))
+        meta = dict(meta or {})
+        if other:
+            meta["dropped_columns"] = other
+        return _assemble("dataframe", names, arr, meta, inputs, outputs, mapping, nan,
+                         "row {}".format, None)
+
+    def to_dataframe(self):
+        """pandas DataFrame with ``t`` first and every column (the metadata in ``.attrs``)."""
+        import pandas as pd
+        df = pd.DataFrame(self.data, columns=self.columns)
+        df.insert(0, "t", self.t)
+        df.attrs.update(plain(self.meta))
+        return df
+
+    def without_rows(self, drop) -> "Dataset":
+        """A copy without the rows where ``drop`` (bool (N,)) is True, cut into segments there
+        (the existing seams kept): nothing is interpolated across the rows left out."""
+        drop = np.asarray(drop, bool)
+        if drop.shape != self.t.shape:
+            raise ValueError(f"drop: expected shape {self.t.shape}, got {drop.shape}")
+        if drop.all():
+            raise ValueError("drop: every row would be left out")
+        segments = kept_segments(~drop, self.segments)
+        meta = {k: v for k, v in self.meta.items() if k != "segments"}
+        if len(segments) > 1:
+            meta["segments"] = segments
+        return Dataset(t=self.t[~drop], columns=list(self.columns), data=self.data[~drop],
+                       meta=meta, input_names=self.inputs, output_names=self.outputs)
+
+    @property
+    def segments(self) -> list[tuple[int, int]]:
+        """(start, stop) row ranges of the record's segments (``meta["segments"]``; one segment
+        when none is declared): a model never predicts across a seam."""
+        seg = self.meta.get("segments")
+        return check_segments(seg, len(self)) if seg else [(0, len(self))]
 
     # -- access -------------------------------------------------------------------------
     def __len__(self) -> int:
@@ -264,40 +325,43 @@ def check_sidecar(meta: dict, t: np.ndarray, header: list[str], where) -> None:
         bad("model.effects", f"expected a list of effect names, got {json.dumps(eff)[:60]}")
 
 
-def _locate_bad_row(path: Path, lines: list[str], ncol: int, columns: list[str]) -> None:
-    """Slow path after the fast parser failed: find the first bad line and raise."""
-    for k, line in enumerate(lines[1:], start=2):
+def _locate_bad_row(path: Path, lines: list[str], ncol: int, columns: list[str],
+                    rows=None, nan: str = "error", skip: int = 0) -> None:
+    """Slow path: check the data lines (all, or the 0-based data ``rows`` given) cell by cell
+    and raise at the first bad one (cell count, non-numeric, or a missing value when ``nan`` is
+    "error"). ``skip`` leading cells (a pandas index) are not numbers."""
+    todo = range(len(lines) - 1) if rows is None else rows
+    for r in todo:
+        k, line = int(r) + 2, lines[int(r) + 1]
         cells = next(csv.reader([line]))
         if len(cells) != ncol:
             raise ValueError(f"{path}: line {k}: expected {ncol} cells, found {len(cells)}")
-        for j, cell in enumerate(cells):
+        for j, cell in enumerate(cells[skip:], start=skip):
+            if not cell.strip():
+                if nan == "error":
+                    raise ValueError(f"{path}: line {k}: column {columns[j]!r}: non-numeric cell "
+                                     f"{cell!r} (an empty cell is a missing value: read with "
+                                     f"nan='split' to cut the record there)")
+                continue
             try:
-                float(cell)
+                v = float(cell)
             except ValueError:
                 raise ValueError(f"{path}: line {k}: column {columns[j]!r}: "
                                  f"non-numeric cell {cell!r}") from None
-    raise ValueError(f"{path}: could not parse the numeric rows")  # pragma: no cover
+            if nan == "error" and not np.isfinite(v):
+                raise ValueError(f"{path}: line {k}: column {columns[j]!r}: "
+                                 f"NaN or Inf cell {cell.strip()!r}")
+    if rows is None:
+        raise ValueError(f"{path}: could not parse the numeric rows")  # pragma: no cover
 
 
-def read_dataset(path: str | os.PathLike, inputs: Sequence[str] | str | None = None,
-                 outputs: Sequence[str] | str | None = None) -> Dataset:
-    """Read ``FILE.csv`` (and ``FILE.json`` if present) into a Dataset.
+def _read_csv(path: Path, nan: str):
+    """(header with ``t`` first, (N, C) float64 array) of a CSV file. pandas' default output
+    (an unnamed index column first) and PlotJuggler's ``__time`` first column are accepted: the
+    index column is dropped, ``__time`` read as ``t``. Numbers are parsed by pandas (exact
+    round trip of float64); every error names the line."""
+    import pandas as pd
 
-    Args:
-        path: the CSV file.
-        inputs, outputs: column names to select (a list or a comma-separated string); default
-            the sidecar's ``inputs``/``outputs``, else the standard names present.
-
-    Raises:
-        ValueError naming the file and line: empty file, missing ``t`` (must be first),
-        duplicate or empty column name, wrong number of cells, non-numeric, NaN or Inf cell,
-        non-increasing ``t``, unknown requested column, corrupt sidecar or one that disagrees
-        with the data (``check_sidecar``).
-        FileNotFoundError if the file does not exist.
-    """
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such file")
     text = path.read_text(encoding="utf-8-sig")
     lines = text.splitlines()
     while lines and not lines[-1].strip():
@@ -305,43 +369,142 @@ def read_dataset(path: str | os.PathLike, inputs: Sequence[str] | str | None = N
     if not lines:
         raise ValueError(f"{path}: line 1: empty file (expected a header row starting with 't')")
     header = [c.strip() for c in next(csv.reader([lines[0]]))]
-    if not header or header[0] != "t":
-        raise ValueError(f"{path}: line 1: the first column must be 't', found {header[:1]}")
+    skip = 1 if len(header) > 1 and header[0] in ("", "Unnamed: 0") else 0
+    names = header[skip:]
+    if names[:1] == ["__time"]:
+        names[0] = "t"
+    if not names or names[0] != "t":
+        raise ValueError(f"{path}: line 1: the first column must be 't', found {names[:1]}")
     try:
-        _check_names(header, f"{path}: line 1")
+        _check_names(names, f"{path}: line 1")
     except ValueError as exc:
         raise ValueError(str(exc)) from None
-    columns = header[1:]
     for k, line in enumerate(lines[1:], start=2):
         if not line.strip():
             raise ValueError(f"{path}: line {k}: empty line inside the data")
     if len(lines) < 2:
         raise ValueError(f"{path}: line 2: no data rows after the header")
+    full = header[:skip] + names
     try:
-        arr = np.loadtxt(lines[1:], delimiter=",", ndmin=2, dtype=np.float64, comments=None)
-        if arr.shape[1] != len(header):
-            raise ValueError("cell count")
-    except ValueError:
-        _locate_bad_row(path, lines, len(header), header)
+        arr = pd.read_csv(io.StringIO("\n".join(lines[1:])), header=None,
+                          dtype={j: np.float64 for j in range(skip, len(full))},
+                          skip_blank_lines=False).to_numpy()
+    except (ValueError, pd.errors.ParserError):
+        _locate_bad_row(path, lines, len(full), full, nan=nan, skip=skip)
         raise  # pragma: no cover
-    finite = np.isfinite(arr)
-    if not finite.all():
-        r, c = np.argwhere(~finite)[0]
-        raise ValueError(f"{path}: line {r + 2}: column {header[c]!r}: "
-                         f"NaN or Inf cell {lines[r + 1].split(',')[c].strip()!r}")
+    if arr.shape != (len(lines) - 1, len(full)):
+        _locate_bad_row(path, lines, len(full), full, nan=nan, skip=skip)
+        raise ValueError(f"{path}: could not parse the numeric rows")  # pragma: no cover
+    arr = np.ascontiguousarray(arr[:, skip:], dtype=np.float64)
+    bad_rows = np.flatnonzero(~np.isfinite(arr).all(axis=1))
+    if bad_rows.size:   # short rows read as NaN; a NaN is an error unless nan="split"
+        _locate_bad_row(path, lines, len(full), full, rows=bad_rows, nan=nan, skip=skip)
+    return names, arr
+
+
+def _assemble(where: str, names: list[str], arr: np.ndarray, meta: dict, inputs, outputs,
+              mapping: dict, nan: str, row_name, side: Path | None) -> "Dataset":
+    """A Dataset from a table (``t`` first): time checks, sidecar checks, the column map, the
+    missing-value policy (cdam_core.record.columns); ``row_name(r)`` names data row r."""
     t = arr[:, 0]
+    bad = np.flatnonzero(~np.isfinite(t))
+    if bad.size:
+        raise ValueError(f"{where}: {row_name(int(bad[0]))}: t is NaN or Inf")
     bad = np.flatnonzero(np.diff(t) <= 0)
     if bad.size:
         r = int(bad[0]) + 1
-        raise ValueError(f"{path}: line {r + 2}: t not strictly increasing "
+        raise ValueError(f"{where}: {row_name(r)}: t not strictly increasing "
                          f"({t[r - 1]!r} -> {t[r]!r})")
-    meta = _read_sidecar(path)
-    check_sidecar(meta, t, header, sidecar_path(path))
+    if side is not None:
+        check_sidecar(meta, t, names, side)
+    columns, data = apply_column_map(names[1:], arr[:, 1:], mapping, where)
+    meta = dict(meta)
+    if mapping:
+        units = dict(meta.get("units") or {})
+        meta["units"] = {**{k: v for k, v in units.items() if k in columns},
+                         **{n: units[c] for n, (c, f) in mapping.items() if c in units and f == 1}}
+        meta["map"] = {n: c if f == 1 else f"{c}*{f!r}" for n, (c, f) in mapping.items()}
+    if nan == "error":
+        finite = np.isfinite(data)
+        if not finite.all():
+            r, c = np.argwhere(~finite)[0]
+            raise ValueError(f"{where}: {row_name(int(r))}: column {columns[c]!r}: NaN or Inf "
+                             f"(read with nan='split' to cut the record there)")
+    else:
+        probe = Dataset.__new__(Dataset)
+        probe.columns, probe.meta = columns, meta
+        try:
+            sel = probe._resolve(inputs, "inputs", STANDARD_INPUTS) + \
+                probe._resolve(outputs, "outputs", STANDARD_OUTPUTS)
+        except ValueError as exc:
+            raise ValueError(f"{where}: {exc}") from None
+        rows, keep, dropped = split_missing(data, columns, sel)
+        if not rows.any():
+            raise ValueError(f"{where}: no row has finite values in every selected column "
+                             f"({', '.join(sel) or 'all columns'})")
+        seams = meta.get("segments")
+        seams = check_segments(seams, len(t), f"{where}: segments") if seams else [(0, len(t))]
+        segments = kept_segments(rows, seams)
+        t, data = t[rows], data[rows][:, keep]
+        columns = [columns[j] for j in keep]
+        meta.pop("segments", None)
+        if len(segments) > 1:
+            meta["segments"] = segments
+        if not rows.all():
+            meta["dropped_rows"] = int((~rows).sum())
+        if dropped:
+            meta["dropped_columns"] = dropped
+        meta.pop("columns", None)
     try:
-        return Dataset(t=t.copy(), columns=columns, data=arr[:, 1:], meta=meta,
+        return Dataset(t=t.copy(), columns=columns, data=data, meta=meta,
                        input_names=inputs, output_names=outputs)
     except ValueError as exc:
-        raise ValueError(f"{path}: line 1: {exc}") from None
+        raise ValueError(f"{where}: {exc}") from None
+
+
+def _prepare(nan, mapping):
+    if nan not in NAN_POLICIES:
+        raise ValueError(f"nan: expected one of {', '.join(NAN_POLICIES)}, got {nan!r}")
+    return parse_column_map(mapping, "map")
+
+
+def read_dataset(path: str | os.PathLike, inputs: Sequence[str] | str | None = None,
+                 outputs: Sequence[str] | str | None = None, *, mapping=None,
+                 nan: str = "error") -> Dataset:
+    """Read a record: ``FILE.csv`` or ``FILE.parquet`` (and ``FILE.json`` if present).
+
+    Args:
+        path: the CSV or Parquet file (chosen by the suffix; anything but ``.parquet`` is CSV).
+        inputs, outputs: column names to select (a list or a comma-separated string), after the
+            map; default the sidecar's ``inputs``/``outputs``, else the standard names present.
+        mapping: a column map (text, a JSON file or a dict; :mod:`cdam_core.record.columns`).
+        nan: "error" (every cell finite) or "split" (rows with a missing value in a selected
+            column dropped and the record cut there into segments; see
+            :mod:`cdam_core.record.columns`).
+
+    Raises:
+        ValueError naming the file and line (CSV) or row (Parquet): empty file, missing ``t``
+        (must be first), duplicate or empty column name, wrong number of cells, non-numeric,
+        NaN or Inf cell (``nan="error"``), non-increasing ``t``, unknown requested or mapped
+        column, corrupt Parquet file, corrupt sidecar or one that disagrees with the data
+        (``check_sidecar``).
+        FileNotFoundError if the file does not exist.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such file")
+    mapping = _prepare(nan, mapping)
+    if path.suffix.lower() == ".parquet":
+        names, arr, other = read_parquet_table(path)
+        row_name = "row {}".format
+    else:
+        (names, arr), other = _read_csv(path, nan), []
+        row_name = lambda r: f"line {r + 2}"   # noqa: E731  (header is line 1)
+    meta = _read_sidecar(path)
+    if other:
+        meta["dropped_columns"] = other
+    return _assemble(str(path), names, arr, meta, inputs, outputs, mapping, nan, row_name,
+                     sidecar_path(path))
 
 
 # -- writing --------------------------------------------------------------------------------
@@ -349,27 +512,24 @@ def read_dataset(path: str | os.PathLike, inputs: Sequence[str] | str | None = N
 
 
 def write_dataset(path: str | os.PathLike, dataset: Dataset, *, sidecar: bool = True) -> None:
-    """Write ``dataset`` to ``FILE.csv`` and its metadata to ``FILE.json`` (both atomically).
+    """Write ``dataset`` to ``FILE.csv`` or ``FILE.parquet`` and its metadata to ``FILE.json``
+    (each atomically).
 
-    Numbers are written with Python's shortest round-trip representation, so reading back
-    gives bit-identical float64 values. The sidecar holds the dataset's ``meta`` plus
-    ``rate`` (declared or measured), ``units`` (standard units for standard names, overridden
-    by ``meta["units"]``), ``columns``, ``inputs`` and ``outputs``.
+    CSV numbers are written with Python's shortest round-trip representation and Parquet holds
+    float64, so reading back gives bit-identical values. The sidecar holds the dataset's
+    ``meta`` (segments included) plus ``rate`` (declared or measured), ``units`` (standard units
+    for standard names, overridden by ``meta["units"]``), ``columns``, ``inputs`` and
+    ``outputs``.
     """
     if not isinstance(dataset, Dataset):
         raise ValueError(f"dataset: expected a Dataset, got {type(dataset).__name__}")
     path = Path(path)
-    if path.suffix.lower() != ".csv":
-        raise ValueError(f"path: expected a .csv file name, got {path.name!r}")
+    kind = path.suffix.lower()
+    if kind not in (".csv", ".parquet"):
+        raise ValueError(f"path: expected a .csv or .parquet file name, got {path.name!r}")
     if not path.parent.is_dir():
         raise ValueError(f"path: folder {str(path.parent)!r} does not exist")
-    buf = io.StringIO()
-    buf.write(",".join(["t"] + dataset.columns) + "\n")
     full = np.column_stack([dataset.t, dataset.data])
-    rep = float.__repr__
-    for row in full.tolist():
-        buf.write(",".join(map(rep, row)))
-        buf.write("\n")
     if sidecar:
         meta = dict(dataset.meta)
         if len(dataset) >= 2 or "rate" in meta:
@@ -380,4 +540,13 @@ def write_dataset(path: str | os.PathLike, dataset: Dataset, *, sidecar: bool = 
         meta["outputs"] = dataset.outputs
         write_text_atomic(sidecar_path(path),
                            json.dumps(plain(meta), indent=2, sort_keys=False) + "\n")
+    if kind == ".parquet":
+        write_parquet_table(path, ["t"] + dataset.columns, full)
+        return
+    buf = io.StringIO()
+    buf.write(",".join(["t"] + dataset.columns) + "\n")
+    rep = float.__repr__
+    for row in full.tolist():
+        buf.write(",".join(map(rep, row)))
+        buf.write("\n")
     write_text_atomic(path, buf.getvalue())

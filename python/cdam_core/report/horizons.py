@@ -6,9 +6,11 @@ from pathlib import Path
 
 import numpy as np
 
-from cdam_core.base.jsonio import write_text_atomic
+from cdam_core.base.jsonio import atomic_target, write_text_atomic
 
-__all__ = ["horizon_table", "write_horizon_report"]
+__all__ = ["horizon_table", "group_table", "write_horizon_report"]
+
+GROUP_UNITS = {"position": "m", "velocity": "m/s", "attitude": "rad", "rates": "rad/s"}
 
 
 def horizon_table(scores, at=None) -> str:
@@ -24,31 +26,93 @@ def horizon_table(scores, at=None) -> str:
     return "\n".join(lines)
 
 
+def group_table(scores, at=(1, 10, 25, 50)) -> str:
+    """Markdown table per group: RMSE and MAE of each predictor at the horizons ``at`` (those
+    scored) and the MAE summed over h = 1..50 (the nano-drone benchmark's metrics)."""
+    hs = scores.horizons
+    at = [h for h in at if h in hs] or [hs[-1]]
+    names = [g.name for g in scores.groups]
+    head = ("| predictor | group | " + " | ".join(f"RMSE h={h}" for h in at) + " | " +
+            " | ".join(f"MAE h={h}" for h in at) + " | MAE sum 1..50 |")
+    lines = [head, "|" + "---|" * (2 * len(at) + 3)]
+    for name in scores.group_rmse:
+        total = scores.group_mae_sum(name)
+        for g, gname in enumerate(names):
+            r = [scores.group_rmse[name][hs.index(h), g] for h in at]
+            a = [scores.group_mae[name][hs.index(h), g] for h in at]
+            lines.append(f"| {name} | {gname} [{_unit(scores.groups[g])}] | " +
+                         " | ".join(f"{v:.4g}" for v in r + a) + " | " +
+                         ("-" if total is None else f"{total[g]:.4g}") + " |")
+    return "\n".join(lines)
+
+
 def write_horizon_report(scores, folder, title: str, dt: float | None = None,
                          units: dict | None = None) -> Path:
     """``index.md`` and ``rmse_vs_horizon.png`` (one panel per output) in ``folder``."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     units = units or {}
-    m = len(scores.outputs)
-    fig, axes = plt.subplots(m, 1, figsize=(6.4, 2.2 * m + 0.6), squeeze=False, sharex=True)
     x = np.asarray(scores.horizons, dtype=float) * (dt if dt else 1.0)
-    for j, (ax, o) in enumerate(zip(axes[:, 0], scores.outputs)):
-        for name, R in scores.rmse.items():
-            ax.plot(x, R[:, j], marker="." if len(x) < 60 else None, label=name)
-        ax.set_ylabel(f"RMSE {o} [{units.get(o, 'output units')}]")
-        ax.grid(True, alpha=0.3)
-    axes[0, 0].legend(loc="upper left", fontsize=8)
-    axes[-1, 0].set_xlabel("horizon [s]" if dt else "horizon [samples]")
-    fig.tight_layout()
-    fig.savefig(folder / "rmse_vs_horizon.png", dpi=110)
-    plt.close(fig)
+    _panels(folder / "rmse_vs_horizon.png", x, dt, scores.rmse,
+            [f"RMSE {o} [{units.get(o, 'output units')}]" for o in scores.outputs])
     md = [f"# {title}", "", horizon_table(scores), "",
           "![RMSE against horizon](rmse_vs_horizon.png)", "",
           "*Figure: root-mean-square error of each output against the prediction horizon, for "
           "the model and the naive predictor y(t) = y(t - h), on the same rows.*", ""]
+    if scores.groups:
+        _panels(folder / "group_mae_vs_horizon.png", x, dt, scores.group_mae,
+                [f"MAE {g.name} [{_unit(g)}]" for g in scores.groups])
+        md += ["## Per group (the nano-drone benchmark's metrics)", "", group_table(scores), "",
+               "![MAE per group against horizon](group_mae_vs_horizon.png)", "",
+               "*Figure: mean error per group against the prediction horizon (Euclidean norm of "
+               "the group's error vector; attitude as the quaternion geodesic angle), for every "
+               "predictor of the comparison, on the same rows.*", ""]
     write_text_atomic(folder / "index.md", "\n".join(md))
     return folder / "index.md"
+
+
+def _unit(group) -> str:
+    return "rad" if group.kind != "vector" else GROUP_UNITS.get(group.name, "output units")
+
+
+def _panels(path, x, dt, series: dict, ylabels: list[str]) -> None:
+    """One panel per column of the (H, k) arrays of ``series`` (predictor -> array)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    k = len(ylabels)
+    fig, axes = plt.subplots(k, 1, figsize=(6.4, 2.2 * k + 0.6), squeeze=False, sharex=True)
+    for j, (ax, label) in enumerate(zip(axes[:, 0], ylabels)):
+        for name, A in series.items():
+            ax.plot(x, A[:, j], marker="." if len(x) < 60 else None, label=name)
+        ax.set_ylabel(label)
+        ax.grid(True, alpha=0.3)
+    axes[0, 0].legend(loc="upper left", fontsize=8)
+    axes[-1, 0].set_xlabel("horizon [s]" if dt else "horizon [samples]")
+    fig.tight_layout()
+    with atomic_target(path) as tmp:
+        fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+
+
+def published_table() -> str:
+    """Markdown: the nano-drone benchmark's published MAE table and the quoted RMSE re-run
+    (``evaluate.published``), for printing beside ours."""
+    from cdam_core.evaluate.published import (GROUPS, NANODRONE_PUBLISHED,
+                                              NANODRONE_RERUN_RMSE_H50, NANODRONE_SOURCE)
+    units = [GROUP_UNITS[g] for g in GROUPS]
+    lines = [f"Published (benchmark test type, not among our flights; {NANODRONE_SOURCE}): MAE "
+             f"at h = 50 (sum over h = 1..50)", "",
+             "| model | " + " | ".join(f"{g} [{u}]" for g, u in zip(GROUPS, units)) + " |",
+             "|" + "---|" * (len(GROUPS) + 1)]
+    for name, row in NANODRONE_PUBLISHED.items():
+        lines.append(f"| {name} | " + " | ".join(f"{row[g][0]:.3f} ({row[g][1]:.2f})"
+                                                for g in GROUPS) + " |")
+    lines += ["", "RMSE at h = 50 on that test type, as quoted in issue [flights] (re-run of the "
+              "published weights, and a least-squares ARX(1) on the 17 flights):", "",
+              "| model | " + " | ".join(GROUPS) + " |", "|" + "---|" * (len(GROUPS) + 1)]
+    for name, row in NANODRONE_RERUN_RMSE_H50.items():
+        cells = [f"{v[0]:.3f}-{v[1]:.3f}" if isinstance(v, tuple) else f"{v:.3f}"
+                 for v in (row[g] for g in GROUPS)]
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)

@@ -1,0 +1,91 @@
+"""The cross-trajectory protocol on the nano-drone flights: train on three trajectory types,
+test on the fourth, all four ways (issue [flights]).
+
+For one fold: the training flights are those of the other types; the ARX baseline's orders are
+chosen on them alone (``baselines.select_arx``: the last run of each training type, by file
+name, is the validation record, the rest is fitted; the chosen orders are refitted on all
+training flights), and a full-state ARX(1) (na = nb = nk = 1) is fitted on all training flights.
+Both and the naive predictor are scored on every flight of the test type at every horizon
+1..50 (k-step from the measured state with the measured inputs; the benchmark's metrics per
+group, ``evaluate.groups``).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from cdam_core.evaluate.baselines import ARX_GRID, select_arx
+from cdam_core.evaluate.groups import NANODRONE_GROUPS
+from cdam_core.evaluate.horizons import HorizonScores, score_horizons
+from cdam_core.models.arx import ArxModel
+from cdam_core.record.realdata.nanodrone import load_nanodrone, trajectory_type
+from cdam_core.record.stack import stack_records
+
+__all__ = ["Fold", "cross_trajectory_fold", "mean_over_folds", "TYPES"]
+
+TYPES = ("square", "random1", "random2", "multisine")
+
+
+@dataclass
+class Fold:
+    """One fold's result: scores of ``naive``, ``arx1`` and ``arx`` (chosen orders)."""
+
+    test_type: str
+    train_files: list[str]
+    test_files: list[str]
+    orders: tuple
+    validation: dict
+    scores: HorizonScores
+
+    def to_json(self) -> dict:
+        return {"test_type": self.test_type, "train_files": self.train_files,
+                "test_files": self.test_files, "arx_orders": list(self.orders),
+                "arx_validation": {",".join(map(str, k)): v for k, v in self.validation.items()},
+                **self.scores.to_json()}
+
+
+def cross_trajectory_fold(files, test_type: str, horizon: int = 50, grid=ARX_GRID,
+                          select_horizons=(1, 10, 25, 50), loaded: dict | None = None) -> Fold:
+    """Run one fold (module doc) on the flights ``files``; ``loaded``: a {path: Dataset}
+    cache shared between folds (filled here)."""
+    files = [Path(f) for f in files]
+    loaded = {} if loaded is None else loaded
+    for f in files:
+        if f not in loaded:
+            loaded[f] = load_nanodrone(f)
+    test = [f for f in files if trajectory_type(f) == test_type]
+    train = [f for f in files if trajectory_type(f) != test_type]
+    if not test or not train:
+        raise ValueError(f"test_type: {test_type!r} leaves no test or no training flight")
+    last = {trajectory_type(f): f for f in sorted(train)}
+    valid = sorted(last.values())
+    fit = [f for f in train if f not in valid]
+    st_fit, st_valid, st_train, st_test = (stack_records([loaded[f] for f in x])
+                                           for x in (fit, valid, train, test))
+    groups = list(NANODRONE_GROUPS)
+    arx, orders, val = select_arx(st_fit, st_valid, grid, select_horizons, groups)
+    arx1 = ArxModel((1, 1, 1)).fit(st_train.U, st_train.Y, segments=st_train.lengths)
+    hs = list(range(1, horizon + 1))
+    kw = dict(segments=st_test.lengths, free_run=False, groups=groups,
+              first=max(arx.t0, arx1.t0))
+    sc = score_horizons(arx1, st_test.U, st_test.Y, st_test.outputs, hs, **kw)
+    sc.free_run.clear()
+    for store in (sc.rmse, sc.mae, sc.group_rmse, sc.group_mae):
+        store["arx1"] = store.pop("model")
+    other = score_horizons(arx, st_test.U, st_test.Y, st_test.outputs, hs, **kw)
+    sc.add(other, "model", "arx")
+    return Fold(test_type, [str(f) for f in train], [str(f) for f in test], orders, val, sc)
+
+
+def mean_over_folds(folds) -> HorizonScores:
+    """The folds' scores averaged (each fold weighs alike; ``rows`` summed)."""
+    first = folds[0].scores
+    out = HorizonScores(list(first.outputs), list(first.horizons), groups=list(first.groups))
+    out.rows = [int(sum(f.scores.rows[i] for f in folds)) for i in range(len(first.horizons))]
+    for key in ("rmse", "mae", "group_rmse", "group_mae"):
+        mine = getattr(out, key)
+        for name in getattr(first, key):
+            mine[name] = np.mean([getattr(f.scores, key)[name] for f in folds], axis=0)
+    return out
