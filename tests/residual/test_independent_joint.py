@@ -17,7 +17,7 @@ from cdam_core.residual.analyse import analyse
 from cdam_core.residual.cutoff import noise_cutoff
 from cdam_core.residual.validation import motion_horizon
 
-from joint_generator import Joint, rigid_axis
+from joint_generator import TRUTH, Joint, rigid_axis
 
 CONDITIONS = {
     "horizontal_open_1k": Joint(),
@@ -29,6 +29,9 @@ CONDITIONS = {
     "horizontal_open_1k_hardening": Joint(K3=400.0),
     # 2.35 Hz: more than the Hann main lobe (2 bins of 0.2 Hz) from every excitation line
     "vertical_open_1k_periodic": Joint(plane="vertical", periodic=(0.05, 2.35)),
+    # a joint far stiffer than the encoders resolve, the link encoder latched 2 ms early
+    "rigid_joint_with_skew": Joint(params={**TRUTH, "Ks": 1e5}, skew=0.002, motor_counts=16384,
+                                   link_counts=16384),
 }
 WELL_EXCITED = ("Im", "Ks", "I", "Dl")
 
@@ -131,3 +134,17 @@ def test_rigid_axis_with_a_coarse_encoder():
         assert sel.final.theta[p] == pytest.approx(r["truth"][p], rel=0.05), p
     fc = sel.final.theta["coulomb_friction@tau.Fc"]
     assert fc == pytest.approx(1.0, rel=0.05)
+
+
+def test_skewed_encoders_on_a_rigid_joint_fall_back_to_the_motor_axis():
+    """The motor-minus-link angle of a rigid joint with a 2 ms encoder skew is velocity times
+    the skew, not a deflection: the flexible model is declared not identifiable and the motor
+    side is identified as a rigid axis (inertia Im + I: the link rides on the motor)."""
+    r, sel = _run("rigid_joint_with_skew")
+    idf = sel.settings["identifiability"]
+    assert idf["identifiable"] is False and idf["fallback"].startswith("rigid_axis")
+    assert idf["velocity_coefficient_s"] == pytest.approx(0.002, rel=0.1)
+    assert sel.model.name == "rigid_axis"
+    assert sel.final.theta["M"] == pytest.approx(TRUTH["Im"] + TRUTH["I"], rel=0.05)
+    for name in ("horizontal_open_1k", "vertical_motor_pd_500_coarse_link"):
+        assert _run(name)[1].settings["identifiability"]["identifiable"] is True

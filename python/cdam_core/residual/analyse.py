@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from cdam_core.models.greybox.declared import DerivativeFilter
 from cdam_core.residual.cutoff import at_rest, choose_cutoff
+from cdam_core.residual.identifiability import deflection_check
 from cdam_core.models.greybox.registry import get_model
 from cdam_core.models.greybox.effects import LIBRARY, candidates as library_candidates
 from cdam_core.residual.selection import Selection, select
@@ -45,10 +46,26 @@ def analyse(model: str, t, signals: dict, extra: dict | None = None, fixed: dict
         cands = at_rest(m, cands, choice, alpha)
         dec = [c for c in cands if c.name in set(declared)]
     sig = m.prepare(t, signals, filt, extra)
+    check = None
+    if m.cables and not getattr(m, "parallel_filter", False):   # a cable between two encoders
+        noise = sum(ev.get("noise_level", 0.0) * choice["chosen_hz"][p]
+                    for p, ev in choice.get("signals", {}).items())
+        check = deflection_check(sig, trim or 50, noise, alpha)
+        if not check["identifiable"] and len(m.positions) == 2 and "theta_m" in signals:
+            # not a cable's deflection: the motor side alone, a rigid axis with its friction
+            motor = {"tau": signals[m.inputs[0]], "q": signals["theta_m"]}
+            sel = analyse("rigid_axis", t, motor, extra, None, None, alpha, free_run,
+                          None, options, max_steps, declared)
+            sel.settings["identifiability"] = {
+                **check, "declared": m.name, "fallback": "rigid_axis on the motor side "
+                "(tau_m, theta_m): the motor-minus-link angle is not a cable's deflection"}
+            return sel
     val = None
     if validation is not None:
         val = m.prepare(validation[0], validation[1], sig["filter"], None)
     sel = select(m, sig, cands, alpha=alpha, free_run=free_run, validation=val,
                  max_steps=max_steps, declared_effects=dec, trim=trim)
     sel.settings["filter_choice"] = choice
+    if check is not None:
+        sel.settings["identifiability"] = check
     return sel
