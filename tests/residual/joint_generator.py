@@ -145,3 +145,34 @@ def rigid_axis(fs=1000.0, duration=20.0, M=0.5, Fv=2.0, Fc=1.0, offset=0.0, coun
         q = q + rng.normal(0.0, noise, n)
     return {"t": t, "tau": u, "q": q,
             "truth": {"M": M, "Fv": Fv, "Fc": Fc, "offset": offset}}
+
+
+def _main(argv=None) -> int:
+    """Write one record as CSV (plain numpy) for the README's example; print the truth."""
+    import argparse
+    import json
+    ap = argparse.ArgumentParser(description="independent flexible-joint record (plain numpy)")
+    ap.add_argument("out", help="CSV file to write (columns t, tau_m1, theta_m1, q1)")
+    ap.add_argument("--fs", type=float, default=500.0, help="sampling rate, Hz")
+    ap.add_argument("--plane", choices=("horizontal", "vertical"), default="vertical")
+    ap.add_argument("--control", choices=("open", "motor", "link"), default="motor")
+    ap.add_argument("--link-counts", type=int, default=4096, help="link encoder counts/rev")
+    ap.add_argument("--motor-counts", type=int, default=16384)
+    ap.add_argument("--Fc", type=float, default=0.0, help="motor dry friction, N m")
+    ap.add_argument("--seed", type=int, default=0)
+    a = ap.parse_args(argv)
+    j = Joint(fs=a.fs, plane=a.plane, control=a.control, link_counts=a.link_counts,
+              motor_counts=a.motor_counts, link_noise=2e-4 if a.link_counts else 0.0,
+              Fc=a.Fc, seed=a.seed)
+    r = j.record()
+    np.savetxt(a.out, np.column_stack([r["t"], r["tau_m"], r["theta_m"], r["q"]]),
+               delimiter=",", header="t,tau_m1,theta_m1,q1", comments="", fmt="%.10g")
+    truth = dict(r["truth"])
+    if a.Fc:
+        truth["Fc"] = a.Fc
+    print(json.dumps(truth))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(_main())

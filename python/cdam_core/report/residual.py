@@ -178,8 +178,25 @@ def write_report(sel: Selection, out_dir, title: str | None = None, source: str 
                   "", f"![finding {i + 1}]({png})", ""]
     lines += ["## After", "", f"Residual white (Ljung-Box, 25 lags, 1 %): "
               f"{'yes' if sel.white_after else 'no'}.", ""]
-    lines += ["| parameter | value |", "|---|---|"]
-    lines += [f"| {k} | {v:.6g} |" for k, v in sel.final.theta.items()]
+    lines += ["| parameter | value | standard deviation | relative sigma [%] |", "|---|---|---|---|"]
+    for k, v in sel.final.theta.items():
+        sd = sel.final.std.get(k)
+        if k not in sel.final.estimated:
+            lines.append(f"| {k} | {v:.6g} | fixed | |")
+        elif sd is None or not np.isfinite(sd):
+            lines.append(f"| {k} | {v:.6g} | n/a (at a bound or not identifiable) | |")
+        else:
+            rel = f"{100 * sd / abs(v):.3g}" if v != 0 else ""
+            lines.append(f"| {k} | {v:.6g} | {sd:.3g} | {rel} |")
+    lines += ["", "Standard deviations are the least-squares ones (residuals taken as white: "
+              "optimistic when they are not)."]
+    dropped = sel.settings.get("declared_terms_dropped") or []
+    if dropped:
+        lines += ["", "Declared terms the held-out data do not support (fixed at 0): "
+                  + ", ".join(f"{d['term']} (p {d['p_value']:.2g})" for d in dropped) + "."]
+    idf = sel.settings.get("identifiability")
+    if idf and not idf.get("identifiable", True):
+        lines += ["", f"Not identifiable as {idf.get('declared')}: {idf.get('fallback')}."]
     lines += ["", "## Unexplained structure", ""]
     if sel.unexplained:
         lines += ["| channel | kind | frequency [Hz] | strength |", "|---|---|---|---|"]
