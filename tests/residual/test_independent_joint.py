@@ -148,3 +148,23 @@ def test_skewed_encoders_on_a_rigid_joint_fall_back_to_the_motor_axis():
     assert sel.final.theta["M"] == pytest.approx(TRUTH["Im"] + TRUTH["I"], rel=0.05)
     for name in ("horizontal_open_1k", "vertical_motor_pd_500_coarse_link"):
         assert _run(name)[1].settings["identifiability"]["identifiable"] is True
+
+
+def test_a_term_the_sidecar_declares_is_kept(tmp_path):
+    """Gravity on a horizontal joint is dropped by the data, but kept (estimated near 0) when
+    the record's sidecar declares it; the sidecar's `model.terms` reaches `cdam residual`."""
+    import json
+
+    from cdam_core.cli.main import main
+    r = CONDITIONS["horizontal_open_1k"].record()
+    path = tmp_path / "joint.csv"
+    np.savetxt(path, np.column_stack([r["t"], r["tau_m"], r["theta_m"], r["q"]]), delimiter=",",
+               header="t,tau_m1,theta_m1,q1", comments="", fmt="%.12g")
+    (tmp_path / "joint.json").write_text(json.dumps({"model": {"terms": ["G"]}}))
+    out = tmp_path / "r.json"
+    assert main(["residual", str(path), "--model", "flexible_joint", "--no-free-run",
+                 "--json", str(out), "--quiet"]) == 0
+    js = json.loads(out.read_text())
+    assert "G" not in [d["term"] for d in js["settings"]["declared_terms_dropped"]]
+    assert abs(js["final_parameters"]["G"]) < 0.01   # N m; the vertical joints' G is 0.6
+    assert "G" in [d["term"] for d in _run("horizontal_open_1k")[1].settings["declared_terms_dropped"]]

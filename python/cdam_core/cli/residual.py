@@ -74,12 +74,16 @@ def run(args) -> int:
     from cdam_core.models.greybox.effects import LIBRARY
     meta = getattr(ds, "meta", None) or {}
     declared = [e for e in ((meta.get("model") or {}).get("effects") or []) if e in LIBRARY]
+    # declared terms (an offset, gravity, the cable damping) the sidecar asserts are kept even
+    # when the held-out data do not support them
+    terms = list((meta.get("model") or {}).get("terms") or []) \
+        if isinstance(meta.get("model"), dict) else []
     if sys.stderr.isatty():
         note(args, f"fitting {args.model} and testing {len(LIBRARY)} library effects on "
                    f"{len(ds)} samples (about a minute for long records)")
     sel = analyse(args.model, ds.t, signals, extra=extra or None, cutoff_hz=args.cutoff,
                   alpha=args.alpha, free_run=not args.no_free_run, fixed=fixed or None,
-                  declared=declared)
+                  declared=declared, keep_terms=terms)
     js = to_json(sel)
     js["source"] = str(args.data)
     js["declared_effects"] = declared

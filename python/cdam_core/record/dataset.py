@@ -323,6 +323,9 @@ def check_sidecar(meta: dict, t: np.ndarray, header: list[str], where) -> None:
     eff = model.get("effects") if isinstance(model, dict) else None
     if eff is not None and not _names(eff):
         bad("model.effects", f"expected a list of effect names, got {json.dumps(eff)[:60]}")
+    terms = model.get("terms") if isinstance(model, dict) else None
+    if terms is not None and not _names(terms):
+        bad("model.terms", f"expected a list of parameter names, got {json.dumps(terms)[:60]}")
 
 
 def _locate_bad_row(path: Path, lines: list[str], ncol: int, columns: list[str],

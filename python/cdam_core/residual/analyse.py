@@ -14,7 +14,7 @@ __all__ = ["analyse"]
 def analyse(model: str, t, signals: dict, extra: dict | None = None, fixed: dict | None = None,
             cutoff_hz: float | None = None, alpha: float = 0.01, free_run: bool = True,
             validation: tuple | None = None, options: dict | None = None,
-            max_steps: int | None = None, declared=()) -> Selection:
+            max_steps: int | None = None, declared=(), keep_terms=()) -> Selection:
     """Fit ``model`` to the signals, select missing effects, return the :class:`Selection`.
 
     ``signals`` maps the model's signal names (``tau``, ``q`` / ``tau_m``, ``theta_m``, ``q`` /
@@ -23,11 +23,17 @@ def analyse(model: str, t, signals: dict, extra: dict | None = None, fixed: dict
     of another record for the free-run errors; ``fixed``: known parameters (e.g. the weighed
     mass ``m``, which ``payload_mass`` needs); ``declared``: library effect names the declared
     model already holds (on every channel they apply to), e.g. the sidecar's model effects;
+    ``keep_terms``: optional declared terms (``offset``, ``G``, ``Kd``) kept even when the
+    held-out data do not support them (a sidecar that declares them);
     ``cutoff_hz``: derivative filter cutoff (default: chosen from the record by held-out
     simulation, :func:`cdam_core.residual.cutoff.choose_cutoff`; the choice and the candidates'
     scores are in ``settings["filter_choice"]``).
     """
     m = get_model(model, fixed)
+    keep_terms = [keep_terms] if isinstance(keep_terms, str) else list(keep_terms)
+    unknown = [p for p in keep_terms if p not in m.parameter_names]
+    if unknown:
+        raise ValueError(f"keep_terms: {', '.join(map(str, unknown))} not parameters of {m.name}")
     if isinstance(declared, str):
         declared = [declared]
     for name in declared:
@@ -64,7 +70,7 @@ def analyse(model: str, t, signals: dict, extra: dict | None = None, fixed: dict
     if validation is not None:
         val = m.prepare(validation[0], validation[1], sig["filter"], None)
     sel = select(m, sig, cands, alpha=alpha, free_run=free_run, validation=val,
-                 max_steps=max_steps, declared_effects=dec, trim=trim)
+                 max_steps=max_steps, declared_effects=dec, trim=trim, keep_terms=keep_terms)
     sel.settings["filter_choice"] = choice
     if check is not None:
         sel.settings["identifiability"] = check
