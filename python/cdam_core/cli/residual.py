@@ -83,7 +83,7 @@ def run(args) -> int:
                    f"{len(ds)} samples (about a minute for long records)")
     sel = analyse(args.model, ds.t, signals, extra=extra or None, cutoff_hz=args.cutoff,
                   alpha=args.alpha, free_run=not args.no_free_run, fixed=fixed or None,
-                  declared=declared, keep_terms=terms)
+                  declared=declared, keep_terms=terms, output_error=args.output_error)
     js = to_json(sel)
     js["source"] = str(args.data)
     js["declared_effects"] = declared
@@ -191,6 +191,9 @@ def register(subparsers) -> None:
     p.add_argument("--save", help="write the final model (declared model + the effects found) "
                                   "as a greybox model file here (docs/MODEL_FILE.md)")
     p.add_argument("--report", help="write a Markdown report with PNG figures into this folder")
+    p.add_argument("--output-error", action="store_true",
+                   help="also refine the final model by output error (multiple shooting) and "
+                        "keep it if it predicts held-out windows better than IDIM-LS (slower)")
     p.add_argument("--cutoff", type=float, default=None,
                    help="derivative filter cutoff in Hz (default: rigid_axis and "
                         "flexible_joint choose one per position from the record, where its "

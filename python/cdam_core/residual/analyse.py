@@ -14,7 +14,8 @@ __all__ = ["analyse"]
 def analyse(model: str, t, signals: dict, extra: dict | None = None, fixed: dict | None = None,
             cutoff_hz: float | None = None, alpha: float = 0.01, free_run: bool = True,
             validation: tuple | None = None, options: dict | None = None,
-            max_steps: int | None = None, declared=(), keep_terms=()) -> Selection:
+            max_steps: int | None = None, declared=(), keep_terms=(),
+            output_error: bool = False) -> Selection:
     """Fit ``model`` to the signals, select missing effects, return the :class:`Selection`.
 
     ``signals`` maps the model's signal names (``tau``, ``q`` / ``tau_m``, ``theta_m``, ``q`` /
@@ -23,6 +24,7 @@ def analyse(model: str, t, signals: dict, extra: dict | None = None, fixed: dict
     of another record for the free-run errors; ``fixed``: known parameters (e.g. the weighed
     mass ``m``, which ``payload_mass`` needs); ``declared``: library effect names the declared
     model already holds (on every channel they apply to), e.g. the sidecar's model effects;
+    ``output_error``: also try the output-error refinement (kept if better on held-out data);
     ``keep_terms``: optional declared terms (``offset``, ``G``, ``Kd``) kept even when the
     held-out data do not support them (a sidecar that declares them);
     ``cutoff_hz``: derivative filter cutoff (default: chosen from the record by held-out
@@ -70,7 +72,8 @@ def analyse(model: str, t, signals: dict, extra: dict | None = None, fixed: dict
     if validation is not None:
         val = m.prepare(validation[0], validation[1], sig["filter"], None)
     sel = select(m, sig, cands, alpha=alpha, free_run=free_run, validation=val,
-                 max_steps=max_steps, declared_effects=dec, trim=trim, keep_terms=keep_terms)
+                 max_steps=max_steps, declared_effects=dec, trim=trim, keep_terms=keep_terms,
+                 output_error=output_error)
     sel.settings["filter_choice"] = choice
     if check is not None:
         sel.settings["identifiability"] = check

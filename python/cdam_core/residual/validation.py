@@ -156,12 +156,14 @@ class BlockedCV:
             tot += r[rows] ** 2 / self.eq_norm.get(eq, 1.0)
         return np.mean(tot, axis=1) / max(len(eqs), 1)
 
-    def scores(self, effects=(), model=None) -> tuple[np.ndarray, str]:
+    def scores(self, effects=(), model=None, estimator: str = "idim") -> tuple[np.ndarray, str]:
         """Per-window normalised squared errors over all folds (NaN windows where a fold's
-        model could not be fitted or simulated) and the reason if any failed."""
+        model could not be fitted or simulated) and the reason if any failed. ``estimator``
+        "oe": each fold's IDIM estimate refined by output error on the fold's training windows
+        (:mod:`cdam_core.residual.output_error`; simulation criterion only)."""
         model = self.model if model is None else model
         effects = tuple(effects)
-        key = self._key(model, effects)
+        key = self._key(model, effects) + (estimator,)
         if key in self._cache:
             return self._cache[key]
         U = self._inputs(effects)
@@ -179,6 +181,8 @@ class BlockedCV:
                     continue
                 g = greybox_of(f, self.dt)
                 starts = starts[starts >= g.t0 - 1]
+                if estimator == "oe":
+                    self.refine(g, f, U, mask)
                 out.append(self._shooting(g, U[a:b], self.Y[a:b], starts))
             except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
                 reason = reason or f"fold {k + 1}: {exc}"
@@ -186,6 +190,24 @@ class BlockedCV:
         res = (np.concatenate(out), reason)
         self._cache[key] = res
         return res
+
+    def training_starts(self, mask) -> np.ndarray:
+        """Window starts (rows of the whole record) whose windows lie in ``mask``'s rows."""
+        n, H = self.Y.shape[0], self.horizon
+        st = np.arange(max(1, self.trim), n - self.trim - H, H)
+        ok = np.array([mask[s:s + H + 1].all() for s in st], dtype=bool)
+        return st[ok]
+
+    def refine(self, g, f, U, mask) -> dict:
+        """Output-error refinement of GreyBox ``g`` (from IDIM fit ``f``) on the windows of
+        the rows in ``mask``; returns the refinement's report."""
+        from cdam_core.residual.output_error import refine
+        bounds = dict(getattr(f.model, "bounds", {}) or {})
+        for e in f.effects:
+            bounds.update(e.bounds())
+        _, info = refine(g, U, self.Y, self.training_starts(mask), self.horizon,
+                         self._shooting, bounds)
+        return info
 
     def _shooting(self, g, U, Y, starts) -> np.ndarray:
         """Per-window normalised squared error with each window's initial state fitted."""

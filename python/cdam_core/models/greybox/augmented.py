@@ -306,6 +306,18 @@ class GreyBox(Model):
                 out[j] = x
         return out if path else x
 
+    def set_parameters(self, values: dict) -> "GreyBox":
+        """Replace estimated parameter values (output-error refinement); returns self."""
+        self._check_fitted()
+        for k, v in values.items():
+            if k not in self.theta_:
+                raise ValueError(f"values: {k!r} is not a parameter of the model")
+            if not np.isfinite(v):
+                raise ValueError(f"values: {k} is not finite")
+            self.theta_[k] = float(v)
+        self._inertia = self._inertia_matrix()
+        return self
+
     def windows(self, U, Y, starts, steps: int, x0=None, v0=None) -> np.ndarray:
         """Simulate ``steps`` samples from the measured state at each row of ``starts`` (one
         segment ``U``, ``Y``: multiple shooting windows), or from the given positions ``x0``

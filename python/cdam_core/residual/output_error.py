@@ -1,0 +1,73 @@
+"""Output-error refinement by multiple shooting, and the choice between it and IDIM-LS.
+
+IDIM-LS fits the equations on differentiated, filtered measurements; what a user runs is the
+model's *simulation*. The refinement starts from the IDIM estimates and minimises the error of
+simulated windows (the held-out validation's windows: ``H`` samples from the measured state,
+each window's initial state projected out by least squares) over the estimated parameters with
+``scipy.optimize.least_squares`` (trust-region reflective, the model's physical bounds,
+finite-difference Jacobian). Standard deviations from the Jacobian at the optimum,
+sqrt(diag(s^2 (J'J)^-1)), as optimistic as IDIM's (windows taken as independent).
+
+Which estimate the final model keeps is decided on held-out data like everything else: the
+refinement is run on four blocks and scored on the fifth (``BlockedCV`` with
+``estimator="oe"``), against IDIM-LS's windows, one-sided Wilcoxon at ``alpha``.
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from cdam_core.models.greybox.estimation import apply_fit
+
+__all__ = ["refine", "refined_fit"]
+
+MAX_EVALUATIONS = 80
+
+
+def refine(g, U, Y, starts, horizon: int, shooting, bounds: dict) -> tuple[dict, dict]:
+    """Minimise the multiple-shooting error of GreyBox ``g`` (fitted) over its estimated
+    parameters on the windows at ``starts``; ``shooting(g, U, Y, starts)`` returns each
+    window's mean squared error after the initial-state projection. Returns (theta, info)."""
+    names = list(g.estimated_)
+    th0 = np.array([g.theta_[p] for p in names], dtype=float)
+    scale = np.where(np.abs(th0) > 0, np.abs(th0), 1.0)
+    lo = np.array([bounds.get(p, (-np.inf, np.inf))[0] for p in names]) / scale
+    hi = np.array([bounds.get(p, (-np.inf, np.inf))[1] for p in names]) / scale
+    gap = 1e-9 * (1.0 + np.abs(th0 / scale))      # strictly inside finite bounds
+    x0 = np.clip(th0 / scale, np.where(np.isfinite(lo), lo + gap, -np.inf),
+                 np.where(np.isfinite(hi), hi - gap, np.inf))
+
+    def residual(x):
+        g.set_parameters(dict(zip(names, x * scale)))
+        try:
+            e = shooting(g, U, Y, starts)
+        except ValueError:                  # a diverging trial point: a large, finite error
+            return np.full(starts.size, 1e3)
+        return np.sqrt(np.maximum(e, 0.0))
+
+    r0 = residual(x0)
+    sol = least_squares(residual, x0, bounds=(lo, hi), diff_step=1e-4,
+                        max_nfev=MAX_EVALUATIONS, x_scale="jac")
+    theta = dict(zip(names, map(float, sol.x * scale)))
+    g.set_parameters(theta)
+    dof = max(sol.fun.size - len(names), 1)
+    s2 = float(sol.fun @ sol.fun) / dof
+    try:
+        cov = np.linalg.pinv(sol.jac.T @ sol.jac) * s2
+        std = {p: float(np.sqrt(cov[j, j]) * scale[j]) if cov[j, j] > 0 else float("nan")
+               for j, p in enumerate(names)}
+    except np.linalg.LinAlgError:
+        std = {p: float("nan") for p in names}
+    return theta, {"window_rms_before": float(np.sqrt(np.mean(r0 ** 2))),
+                   "window_rms_after": float(np.sqrt(np.mean(sol.fun ** 2))),
+                   "evaluations": int(sol.nfev), "status": sol.message, "std": std}
+
+
+def refined_fit(fitted, theta: dict, std: dict, sig: dict):
+    """The IDIM ``Fit`` with the refined parameters, its equation residuals recomputed on the
+    prepared signals ``sig`` (those the fit was made on)."""
+    full = dict(fitted.theta)
+    full.update(theta)
+    return apply_fit(dataclasses.replace(fitted, theta=full, std={**fitted.std, **std}), sig)
