@@ -22,7 +22,7 @@ def emps_report(out_dir) -> Path:
     from cdam_core.residual.analyse import analyse
     d, p = load_emps("DATA_EMPS"), load_emps("DATA_EMPS_PULSES")
     sel = analyse("rigid_axis", d["t"], {"tau": d["force"], "q": d["qm"]},
-                  validation=(p["t"], {"tau": p["force"], "q": p["qm"]}))
+                  validation=(p["t"], {"tau": p["force"], "q": p["qm"]}), output_error=True)
     out = write_report(sel, out_dir, title="EMPS (DATA_EMPS, free run on DATA_EMPS_PULSES)",
                        source="EMPS benchmark (Janot, Gautier, Brunot 2019): force = gtau * vir, "
                               "output qm; free-run errors on DATA_EMPS_PULSES")
