@@ -167,7 +167,7 @@ class BlockedCV:
         if key in self._cache:
             return self._cache[key]
         U = self._inputs(effects)
-        H, out, reason = self.horizon, [], ""
+        out, reason = [], ""
         n = self.Y.shape[0]
         for k in range(self.folds):
             a, b = int(self.edges[k]), int(self.edges[k + 1])
