@@ -26,7 +26,10 @@ def _module_name(path: Path) -> str:
 
 
 def _modules() -> dict[str, Path]:
-    return {_module_name(p): p for p in PKG.rglob("*.py")}
+    # firmware_src/ is package data an installed wheel carries (the firmware sources and their
+    # host scripts), not modules of the package
+    return {_module_name(p): p for p in PKG.rglob("*.py")
+            if "firmware_src" not in p.relative_to(PKG).parts}
 
 
 def _imports(name: str, path: Path, known: set[str]) -> set[str]:

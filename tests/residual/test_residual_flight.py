@@ -87,10 +87,19 @@ def test_single_effect_found(spec):
     _check_found(spec, 1.0)
 
 
+# open: with decisions on held-out equation error, at three times the noise the ground effect
+# is not kept and the hardening cable is kept on joint 1 only (its held-out gain on joint 2 is
+# not significant after Bonferroni)
+HELD_OUT_AT_3X = pytest.mark.xfail(strict=True, reason="[greybox] held-out decision at 3x noise "
+                                   "on the flight model: open")
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("spec", ["thrust_loss", "ground_effect", "payload_mass",
-                                  "hardening_stiffness", "actuator_delay:joint=0.02",
-                                  "coulomb_friction"])
+@pytest.mark.parametrize("spec", ["thrust_loss",
+                                  pytest.param("ground_effect", marks=HELD_OUT_AT_3X),
+                                  "payload_mass",
+                                  pytest.param("hardening_stiffness", marks=HELD_OUT_AT_3X),
+                                  "actuator_delay:joint=0.02", "coulomb_friction"])
 def test_single_effect_found_at_three_times_the_noise(spec):
     _check_found(spec, 3.0)
 
