@@ -11,7 +11,7 @@ EFFECTS = ("bias", "gain", "friction")
 def plant(n, seed, effect=None, onset_s=ONSET_S):
     """(U, Y) of n rows; from row onset_s / DT on ``effect`` acts: 'bias' an external force on
     input 0 (+0.02), 'gain' actuator 1 at 85 % of its gain, 'friction' a Coulomb-like force
-    of 0.001 against output 0's motion."""
+    of 0.002 against output 0's motion."""
     rng = np.random.default_rng(seed)
     hold = 200
     U = np.repeat(rng.uniform(-1, 1, (n // hold + 1, 2)), hold, axis=0)[:n]
@@ -28,7 +28,7 @@ def plant(n, seed, effect=None, onset_s=ONSET_S):
             elif effect == "gain":
                 u1 = 0.85 * u1
             elif effect == "friction":
-                fr = -0.001 * np.sign(X[t - 1, 0] - X[t - 2, 0])
+                fr = -0.002 * np.sign(X[t - 1, 0] - X[t - 2, 0])
         X[t, 0] = 1.6 * X[t - 1, 0] - 0.64 * X[t - 2, 0] + 0.04 * u0 + fr + W[t, 0]
         X[t, 1] = 0.9 * X[t - 1, 1] + 0.05 * X[t - 1, 0] + 0.1 * u1 + W[t, 1]
     return U, X + V
