@@ -93,6 +93,7 @@ int main() {
 #if CDAM_MODEL_HAS_MONITOR
     if (head[1] == 0) {
       std::uint8_t flags[fw::kY];
+      std::uint16_t n = g_monitor.count();   // each frame carries the count up to its alarm
       const std::uint32_t m0 = fw::hal::systick_value();
       __asm__ volatile("" ::: "memory");
       const bool any = g_monitor.update(ym, y, flags);
@@ -102,7 +103,8 @@ int main() {
       if (sh::write(alarm_out, flags, sizeof flags) != sizeof flags) return 3;
       for (int c = 0; any && c < fw::kY; ++c) {
         if (!flags[c]) continue;
-        const cdam::CanFrame f = fw::alarm_frame(c, flags[c], g_monitor.count(),
+        if (n < 0xFFFFu) ++n;
+        const cdam::CanFrame f = fw::alarm_frame(c, flags[c], n,
                                                  static_cast<std::uint32_t>(t));
         std::uint8_t rec[12];
         for (int b = 0; b < 4; ++b) rec[b] = static_cast<std::uint8_t>(f.id >> (8 * b));

@@ -14,7 +14,10 @@ from cdam_core.firmware.alarm import ALARM_ID
 from cdam_core.models import ArxModel, save_model
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "evaluate"))
-from _monitor_plant import DT, ONSET_S, plant  # noqa: E402
+from _monitor_plant import DT, EFFECTS, ONSET_S, plant  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _kinds import greybox_file, rigid_record  # noqa: E402
 
 pytestmark = [pytest.mark.slow,
               pytest.mark.skipif(fw.toolchain_available() is not None,
@@ -32,9 +35,10 @@ def built(tmp_path_factory):
     return path, bdir, fw.build(bdir, path)
 
 
-def test_firmware_monitor_equals_python_sample_for_sample(built):
+@pytest.mark.parametrize("effect", EFFECTS)
+def test_firmware_monitor_equals_python_sample_for_sample(built, effect):
     path, bdir, sizes = built
-    U, Y = plant(11_000, seed=11, effect="friction")
+    U, Y = plant(11_000, seed=12, effect=effect)
     r = fw.run_step_equivalence(bdir, path, U, Y, "one_step", timeout=240)
     assert r["monitor_alarms"] > 0                          # the comparison covers alarms
     assert r["monitor_mismatches"] == 0
@@ -53,3 +57,40 @@ def test_image_sizes_include_the_monitor(built):
     _, _, sizes = built
     # the monitor's four per-output arrays and its state (3 floats per output) are there
     assert sizes["fw_step"]["bss"] >= 2 * 3 * 4
+
+
+def _rigid(model, U, bias, onset, noise, seed):
+    """The rigid axis driven by U (+ bias from row ``onset`` on: a force the model does not
+    know), measured with white noise of ``noise``."""
+    Ut = U.copy()
+    Ut[onset:, 0] += bias
+    Y = np.zeros((len(U), 1))
+    Y[model.t0:] = model.predict(Ut, Y, mode="free_run").reshape(-1, 1)[model.t0:]
+    return Y + noise * np.random.default_rng(seed).standard_normal(Y.shape)
+
+
+def test_greybox_monitor_equals_python(tmp_path_factory):
+    from cdam_core.models.file import read_model_file
+    base = greybox_file(tmp_path_factory.mktemp("m") / "gb.json",
+                        effects=("coulomb", "asymmetric"))
+    mf = read_model_file(base)
+    U = rigid_record(6000, seed=3, extra=False)
+    Y = _rigid(mf.model, U, 0.0, 0, 1e-5, 0)
+    path = tmp_path_factory.mktemp("m") / "gb_monitor.json"
+    save_model(path, mf.model, inputs=mf.inputs, outputs=mf.outputs,
+               monitor=calibrate(mf.model, U, Y, mf.model.dt, paths=200, seed=0))
+    bdir = tmp_path_factory.mktemp("fw_gb_monitor")
+    fw.build(bdir, path)
+    U2 = rigid_record(6000, seed=4, extra=False)
+    Y2 = _rigid(mf.model, U2, 2000.0, 3000, 1e-5, 1)   # ~1 residual std
+    r = fw.run_step_equivalence(bdir, path, U2, Y2, "one_step", timeout=240)
+    a, b = r["monitor_flags"], r["monitor_flags_python"]
+    assert a[2998:3500].any()                                # alarms within 0.5 s of the force
+    # rows t0.. : equal before the force and for its first 0.5 s. Later, with the axis
+    # pushed to 28 (float32 spacing 2e-6 there), the firmware's float32 prediction differs
+    # from Python's float64 one by up to 8 % of the residual std, and decisions taken near a
+    # threshold can differ (measured: 225 of the 3,000 rows after the force): equality
+    # sample for sample holds while the residual's std is far above the outputs' float32
+    # spacing.
+    np.testing.assert_array_equal(a[:3500 - 2], b[:3500 - 2])
+    assert r["alarm_frames"][0][4] >= 3000                   # nothing before the force
