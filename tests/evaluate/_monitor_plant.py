@@ -32,3 +32,33 @@ def plant(n, seed, effect=None, onset_s=ONSET_S):
         X[t, 0] = 1.6 * X[t - 1, 0] - 0.64 * X[t - 2, 0] + 0.04 * u0 + fr + W[t, 0]
         X[t, 1] = 0.9 * X[t - 1, 1] + 0.05 * X[t - 1, 0] + 0.1 * u1 + W[t, 1]
     return U, X + V
+
+
+def measure(seeds=range(20, 30), clean_seeds=range(40, 45)):
+    """Alarm delays per effect over ``seeds`` (12 s records, onset at 10 s) and false alarms
+    over ``clean_seeds`` (60 s records without effect), for the model and monitor the tests
+    use (ARX (2, 2, 1) on 60 s, seed 1; thresholds with 1,000 paths, seed 0)."""
+    from cdam_core.evaluate.monitor import calibrate, one_step_residuals, run_monitor
+    from cdam_core.models import ArxModel
+    U, Y = plant(60_000, seed=1)
+    m = ArxModel((2, 2, 1)).fit(U, Y)
+    sec = calibrate(m, U, Y, DT, paths=1000, seed=0)
+    onset = int(round(ONSET_S / DT))
+    out = {"h": sec["h"], "ewma_limit": sec["ewma_limit"], "ar_order": sec["ar_order"]}
+    for effect in EFFECTS:
+        delays, before = [], 0
+        for s in seeds:
+            R, valid = one_step_residuals(m, *plant(12_000, seed=s, effect=effect))
+            alarms = run_monitor(sec, R, valid).alarms
+            before += sum(a[0] < onset for a in alarms)
+            after = [a[0] for a in alarms if a[0] >= onset]
+            delays.append(round((after[0] - onset) * DT, 3) if after else None)
+        out[effect] = {"delays_s": delays, "alarms_before_onset": before}
+    out["false_alarms_60s"] = [len(run_monitor(sec, *one_step_residuals(
+        m, *plant(60_000, seed=s))).alarms) for s in clean_seeds]
+    return out
+
+
+if __name__ == "__main__":   # the figures of the report: python tests/evaluate/_monitor_plant.py
+    import json
+    print(json.dumps(measure(), indent=1))

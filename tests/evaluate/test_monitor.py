@@ -146,3 +146,37 @@ def test_cli_calibrate_then_monitor(tmp_path, capsys):
     assert main(["monitor", str(tmp_path / "mm.json"), str(tmp_path / "run.csv"), "--json",
                  str(tmp_path / "run.csv")]) == 2             # never overwrites an input
     assert main(["monitor", str(tmp_path / "mm.json"), str(tmp_path / "nope.csv")]) == 2
+
+
+@pytest.mark.parametrize("kind", ["bp_network", "hybrid", "greybox"])
+def test_every_kind_with_a_one_step_predictor(tmp_path, kind):
+    """The monitor takes any kind's one-step prediction: the residual equals Y - predict
+    (one_step) rounded to float32, and an offset added to the measured output from row 1,500
+    on is alarmed after it and not before."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "firmware"))
+    from _kinds import greybox_file, rigid_record
+    if kind == "greybox":
+        m = read_model_file(greybox_file(tmp_path / "g.json",
+                                         effects=("coulomb", "asymmetric"))).model
+        U = rigid_record(3000, seed=3, extra=False)
+        Y = np.zeros((3000, 1))
+        Y[m.t0:] = m.predict(U, Y, mode="free_run").reshape(-1, 1)[m.t0:]
+        Y = Y + 1e-4 * np.random.default_rng(0).standard_normal(Y.shape)
+    else:
+        U, Y = plant(3000, seed=7)
+        if kind == "hybrid":
+            from cdam_core.models import HybridNarx
+            m = HybridNarx(narx=(2, 2, 1)).fit(U, Y)
+        else:
+            from cdam_core.models import BPNetwork
+            m = BPNetwork(hidden=4, narx=(2, 2, 1), epochs=30).fit(U, Y)
+    n = Y.shape[0] // 2
+    sec = calibrate(m, U[:n], Y[:n], DT, paths=100, seed=0)
+    R, valid = one_step_residuals(m, U, Y)
+    P = np.asarray(m.predict(U, Y, mode="one_step")).reshape(Y.shape)
+    np.testing.assert_array_equal(R[valid], (Y.astype(np.float32) - P.astype(np.float32))[valid])
+    Y2 = Y.copy()
+    Y2[n:] += 10 * np.asarray(sec["std"])                  # a sensor offset of 10 std
+    R2, valid2 = one_step_residuals(m, U, Y2)
+    alarms = run_monitor(sec, R2, valid2).alarms
+    assert alarms and alarms[0][0] >= n, (kind, alarms[:3])
