@@ -1,10 +1,17 @@
 // Smallest image with a dynamic model (arx, hybrid, greybox): startup + one step per loop on
-// volatile inputs, nothing else. Its text/data/bss are the "model plus step" figures.
+// volatile inputs (and the residual monitor with a correct, when the model file has one),
+// nothing else. Its text/data/bss are the "model plus step" figures.
 #include "fw/step_model.hpp"
+#include "fw/monitor.hpp"
 
 volatile float g_in[fw::kU];
 volatile float g_out[fw::kY];
 fw::StepModel g_model;
+#if CDAM_MODEL_HAS_MONITOR   // with the residual monitor: step, monitor, correct each row
+volatile float g_meas[fw::kY];
+volatile std::uint8_t g_flags[fw::kY];
+fw::Monitor<fw::kY> g_monitor;
+#endif
 
 int main() {
   for (;;) {
@@ -12,5 +19,13 @@ int main() {
     for (int k = 0; k < fw::kU; ++k) u[k] = g_in[k];
     g_model.step(u, y);
     for (int k = 0; k < fw::kY; ++k) g_out[k] = y[k];
+#if CDAM_MODEL_HAS_MONITOR
+    float ym[fw::kY];
+    std::uint8_t flags[fw::kY];
+    for (int k = 0; k < fw::kY; ++k) ym[k] = g_meas[k];
+    g_monitor.update(ym, y, flags);
+    for (int k = 0; k < fw::kY; ++k) g_flags[k] = flags[k];
+    g_model.correct(ym);
+#endif
   }
 }

@@ -4,14 +4,18 @@
 // later row is predicted (fw::StepModel::step) and, in one-step mode, then replaced by the
 // measured row (correct). The predictions go to ./fw_step_out.bin (float32, kY per row).
 // Instructions: SysTick (core clock = virtual time under -icount) read around every step; the
-// host turns ticks into instructions with the calibration loop. Exit 0 ok, 2 parameters
-// corrupt, 3 file error, 4 bad header.
+// host turns ticks into instructions with the calibration loop. With a monitor section
+// (CDAM_MODEL_HAS_MONITOR, fw/monitor.hpp) and in one-step mode, every predicted row also goes
+// through the residual monitor (SysTick read around it too): its flags, one byte per output, go
+// to ./fw_alarm_out.bin and each alarm frame (uint32 id, 8 data bytes) to ./fw_alarm_frames.bin.
+// Exit 0 ok, 2 parameters corrupt, 3 file error, 4 bad header.
 #include <cstdint>
 
 #include "fw/hal.hpp"
 #include "fw/semihost.hpp"
 #include "fw/ticks.hpp"
 #include "fw/step_model.hpp"
+#include "fw/monitor.hpp"
 
 namespace sh = fw::semihost;
 
@@ -23,6 +27,9 @@ namespace {
 using fw::ticks::elapsed;
 
 fw::StepModel g_model;
+#if CDAM_MODEL_HAS_MONITOR
+fw::Monitor<fw::kY> g_monitor;
+#endif
 
 }  // namespace
 
@@ -30,6 +37,11 @@ int main() {
   const std::uint32_t fnv = fw::params_fnv1a();
   sh::kv("params_fnv1a", fnv, true);
   if (fnv != cdam_model::kParamsFnv1a) return 2;
+#if CDAM_MODEL_HAS_MONITOR
+  const std::uint32_t mon = fw::monitor_fnv1a();
+  sh::kv("monitor_fnv1a", mon, true);
+  if (mon != cdam_model::kMonitorFnv1a) return 2;
+#endif
   sh::kv("inputs", fw::kU);
   sh::kv("outputs", fw::kY);
   sh::kv("history", fw::kT0);
@@ -49,6 +61,13 @@ int main() {
   const int in = sh::open("fw_step_in.bin", 1);
   const int out = sh::open("fw_step_out.bin", 5);
   if (in < 0 || out < 0) return 3;
+#if CDAM_MODEL_HAS_MONITOR
+  const int alarm_out = sh::open("fw_alarm_out.bin", 5);
+  const int frames_out = sh::open("fw_alarm_frames.bin", 5);
+  if (alarm_out < 0 || frames_out < 0) return 3;
+  std::uint64_t monitor_ticks = 0;
+  std::uint32_t monitored = 0, frames = 0;
+#endif
   std::int32_t head[2];
   if (sh::read(in, head, sizeof head) != sizeof head) return 3;
   if (head[0] < fw::kT0 || (head[1] != 0 && head[1] != 1)) return 4;
@@ -71,11 +90,43 @@ int main() {
     total_ticks += d;
     if (d > max_ticks) max_ticks = d;
     ++steps;
+#if CDAM_MODEL_HAS_MONITOR
+    if (head[1] == 0) {
+      std::uint8_t flags[fw::kY];
+      std::uint16_t n = g_monitor.count();   // each frame carries the count up to its alarm
+      const std::uint32_t m0 = fw::hal::systick_value();
+      __asm__ volatile("" ::: "memory");
+      const bool any = g_monitor.update(ym, y, flags);
+      __asm__ volatile("" ::: "memory");
+      monitor_ticks += elapsed(m0, fw::hal::systick_value());
+      ++monitored;
+      if (sh::write(alarm_out, flags, sizeof flags) != sizeof flags) return 3;
+      for (int c = 0; any && c < fw::kY; ++c) {
+        if (!flags[c]) continue;
+        if (n < 0xFFFFu) ++n;
+        const cdam::CanFrame f = fw::alarm_frame(c, flags[c], n,
+                                                 static_cast<std::uint32_t>(t));
+        std::uint8_t rec[12];
+        for (int b = 0; b < 4; ++b) rec[b] = static_cast<std::uint8_t>(f.id >> (8 * b));
+        for (int b = 0; b < 8; ++b) rec[4 + b] = f.data[b];
+        if (sh::write(frames_out, rec, sizeof rec) != sizeof rec) return 3;
+        ++frames;
+      }
+    }
+#endif
     if (head[1] == 0) g_model.correct(ym);
     if (sh::write(out, y, sizeof y) != sizeof y) return 3;
   }
   sh::close(in);
   sh::close(out);
+#if CDAM_MODEL_HAS_MONITOR
+  sh::close(alarm_out);
+  sh::close(frames_out);
+  sh::kv("monitored", monitored);
+  sh::kv("alarm_frames", frames);
+  sh::kv("monitor_ticks_hi", static_cast<std::uint32_t>(monitor_ticks >> 32));
+  sh::kv("monitor_ticks_lo", static_cast<std::uint32_t>(monitor_ticks));
+#endif
   sh::kv("steps", steps);
   sh::kv("step_ticks_hi", static_cast<std::uint32_t>(total_ticks >> 32));
   sh::kv("step_ticks_lo", static_cast<std::uint32_t>(total_ticks));

@@ -120,7 +120,10 @@ def _step_report(fm: StepFirmwareModel, sizes: dict, runs: dict, heap_free: bool
     img = sizes["fw_step"]
     one, free = runs["one_step"], runs["free_run"]
     ips = max(one["instructions_per_step"], free["instructions_per_step"])
+    mon = {k: one[k] for k in ("monitor_mismatches", "monitor_alarms", "monitor_alarms_python",
+                               "alarm_frames_equal", "instructions_per_monitor") if k in one}
     return {
+        **mon,
         "kind": fm.kind,
         "model": fm.describe(),
         "text": img["text"], "data": img["data"], "bss": img["bss"],

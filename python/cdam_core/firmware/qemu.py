@@ -121,6 +121,10 @@ def run_step_equivalence(build_dir, model, U, Y, mode: str = "one_step", *,
         if rc != 0:
             raise RuntimeError(f"fw_step_check.elf exited with {rc} under QEMU:\n{text[-2000:]}")
         P = np.fromfile(Path(tmp) / "fw_step_out.bin", dtype="<f4").reshape(-1, fm.n_outputs)
+        monitored = fm.monitor is not None and mode == "one_step"
+        if monitored:
+            flags = np.fromfile(Path(tmp) / "fw_alarm_out.bin", dtype=np.uint8)
+            frames = np.fromfile(Path(tmp) / "fw_alarm_frames.bin", dtype=np.uint8)
     steps = U.shape[0] - fm.history
     if P.shape[0] != steps or int(kv["steps"]) != steps:
         raise RuntimeError(f"firmware answered {P.shape[0]} of {steps} steps")
@@ -132,7 +136,9 @@ def run_step_equivalence(build_dir, model, U, Y, mode: str = "one_step", *,
     empty = int(kv["empty_ticks"])
     err = np.max(np.abs(P.astype(np.float64) - want), axis=0)
     span = np.ptp(Y32.astype(np.float64), axis=0)
-    return {
+    extra = _monitor_report(fm, kv, Y32[fm.history:], want, flags, frames, tpi, steps) \
+        if monitored else {}
+    return {**extra,
         "mode": mode,
         "max_abs_error": float(np.max(err)),
         "output_span": float(np.max(span)),
@@ -144,6 +150,36 @@ def run_step_equivalence(build_dir, model, U, Y, mode: str = "one_step", *,
         "sandbox": kv["sandbox"],
         "steps": steps,
         "outputs": P,
+    }
+
+
+def _monitor_report(fm, kv, Y32, want, flags, frames, tpi, steps) -> dict:
+    """The firmware monitor's decisions (fw/monitor.hpp) beside Python's
+    (cdam_core.evaluate.monitor) on the same float32 record, from Python's own prediction."""
+    from cdam_core.evaluate.monitor import run_monitor
+    from cdam_core.firmware.alarm import decode_alarm_frames
+    if int(kv["monitor_fnv1a"], 16) != fm.monitor_fnv1a():
+        raise RuntimeError("the firmware's monitor numbers differ from the model's (FNV-1a)")
+    if flags.size != steps * fm.n_outputs or int(kv["monitored"]) != steps:
+        raise RuntimeError(f"firmware monitored {flags.size // max(fm.n_outputs, 1)} of "
+                           f"{steps} steps")
+    flags = flags.reshape(steps, fm.n_outputs)
+    R = Y32 - np.asarray(want, np.float64).astype(np.float32)
+    py = run_monitor(fm.monitor, R)
+    got = decode_alarm_frames(frames.tobytes())
+    want_frames = [(c, f, min(k + 1, 0xFFFF), t + fm.history)
+                   for k, (t, c, f) in enumerate(py.alarms)]
+    total = (int(kv["monitor_ticks_hi"]) << 32) + int(kv["monitor_ticks_lo"])
+    return {
+        "monitor_flags": flags,
+        "monitor_flags_python": py.flags,
+        "monitor_mismatches": int(np.count_nonzero(flags != py.flags)),
+        "monitor_alarms": int(np.count_nonzero(flags)),
+        "monitor_alarms_python": len(py.alarms),
+        "alarm_frames": got,
+        "alarm_frames_equal": [(c, f, n, t) for _, c, f, n, t in got] == want_frames,
+        "instructions_per_monitor": round((total - int(kv["empty_ticks"]) * steps)
+                                          / steps / tpi, 1),
     }
 
 

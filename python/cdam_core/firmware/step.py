@@ -48,6 +48,7 @@ class StepFirmwareModel:
     int_arrays: dict = field(default_factory=dict)
     macros: dict = field(default_factory=dict)      # preprocessor selection (integers)
     hashed: tuple = ()         # arrays the firmware's FNV-1a covers, in order
+    monitor: dict | None = None   # the model file's monitor section (fw/monitor.hpp), if any
 
     @property
     def n_inputs(self) -> int:
@@ -60,6 +61,14 @@ class StepFirmwareModel:
     def params_fnv1a(self) -> int:
         return theta_fnv1a(np.concatenate([np.asarray(self.arrays[n], np.float64).ravel()
                                            for n in self.hashed]))
+
+    def monitor_fnv1a(self) -> int:
+        """FNV-1a of the monitor's numbers as the firmware hashes them (0 without a monitor)."""
+        if self.monitor is None:
+            return 0
+        return theta_fnv1a(np.concatenate(
+            [np.asarray(self.arrays[n], np.float64).ravel() for n in MONITOR_ARRAYS] +
+            [np.asarray([self.floats["kMonK"], self.floats["kMonLambda"]])]))
 
     def predict(self, U, Y, mode: str) -> np.ndarray:
         """The Python model's prediction (float64), rows t0.. (``one_step`` or ``free_run``)."""
@@ -88,6 +97,8 @@ class StepFirmwareModel:
             lines.append(f"constexpr float {k} = {c_float(v)};")
         lines.append(f'constexpr char kSourceSha256[] = "{self.sha256}";')
         lines.append(f"constexpr std::uint32_t kParamsFnv1a = 0x{self.params_fnv1a():08X}u;")
+        if self.monitor is not None:
+            lines.append(f"constexpr std::uint32_t kMonitorFnv1a = 0x{self.monitor_fnv1a():08X}u;")
         lines.append("")
         for k, v in self.arrays.items():
             lines.append(c_array(k, np.asarray(v, np.float64).ravel()))
@@ -106,11 +117,27 @@ def step_model(mf, source: str = "") -> StepFirmwareModel:
     else:
         raise ValueError(f"MODEL: a {mf.kind!r} model cannot run on the firmware")
     fm.source = str(source)
+    _monitor(fm, mf)
     for name, values in fm.arrays.items():
         finite32(name, values)
     for name, value in fm.floats.items():
         finite32(name, [value])
     return fm
+
+
+MONITOR_ARRAYS = ("kMonMean", "kMonStd", "kMonH", "kMonEwmaLimit")
+
+
+def _monitor(fm: StepFirmwareModel, mf) -> None:
+    """The residual monitor's numbers (fw/monitor.hpp) from the file's ``monitor`` section."""
+    sec = getattr(mf, "monitor", None)
+    fm.macros["CDAM_MODEL_HAS_MONITOR"] = int(sec is not None)
+    if sec is None:
+        return
+    fm.monitor = sec
+    fm.floats.update({"kMonK": float(sec["k"]), "kMonLambda": float(sec["lambda"])})
+    for name, key in zip(MONITOR_ARRAYS, ("mean", "std", "h", "ewma_limit")):
+        fm.arrays[name] = np.asarray(sec[key], np.float64)
 
 
 def _arx(mf) -> StepFirmwareModel:

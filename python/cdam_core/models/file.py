@@ -6,6 +6,7 @@ docs/MODEL_FILE.md)::
     {"format": "cdam-model", "version": 2, "kind": "bp_network" | "arx" | "hybrid" | "greybox",
      "inputs": [names], "outputs": [names], "preprocessing": {"smoothing_passes": int},
      "meta": {...free JSON...}, "model": {...the kind's section...},
+     "monitor": {...optional: the residual monitor's statistics and thresholds...},
      "checksum": {"sha256": HEX}}
 
 The sha256 is over the canonical JSON (sorted keys, no spaces) of everything but the checksum.
@@ -58,6 +59,7 @@ class ModelFile:
     smoothing_passes: int = 0
     meta: dict = field(default_factory=dict)
     sha256: str = ""
+    monitor: dict | None = None     # the residual monitor's section (evaluate.monitor), if any
 
 
 def _canonical(doc: dict) -> bytes:
@@ -66,8 +68,9 @@ def _canonical(doc: dict) -> bytes:
 
 
 def save_model(path, model: Model, *, inputs=None, outputs=None, smoothing_passes: int = 0,
-               meta=None) -> str:
-    """Write a fitted model of any registered kind to ``path``; returns the sha256."""
+               meta=None, monitor=None) -> str:
+    """Write a fitted model of any registered kind to ``path``; returns the sha256.
+    ``monitor``: the residual monitor's section (``evaluate.monitor.calibrate``), optional."""
     if not isinstance(model, Model) or type(model).kind not in KINDS:
         raise ValueError(f"model: {type(model).__name__} is not a model kind the file knows "
                          f"({', '.join(KINDS)})")
@@ -83,7 +86,10 @@ def save_model(path, model: Model, *, inputs=None, outputs=None, smoothing_passe
            "inputs": inputs, "outputs": outputs,
            "preprocessing": {"smoothing_passes": int(smoothing_passes)},
            "meta": plain(meta or {}), "model": plain(model.to_dict())}
+    if monitor is not None:
+        doc["monitor"] = plain(monitor)
     validate_document(doc)                 # what we write, we can read
+    _check_monitor(doc, n_out)
     digest = hashlib.sha256(_canonical(doc)).hexdigest()
     doc["checksum"] = {"sha256": digest}
     write_text_atomic(path, json.dumps(doc, indent=1, allow_nan=False) + "\n")
@@ -109,6 +115,16 @@ def _upgrade_v1(doc: dict) -> dict:
             "outputs": outputs,
             "preprocessing": {"smoothing_passes": p.get("smoothing_passes", 0)},
             "meta": p.get("meta") or {}, "model": section}
+
+
+def _check_monitor(doc: dict, n_outputs: int) -> None:
+    """The monitor section's per-output lists hold one value per output."""
+    mon = doc.get("monitor")
+    if mon is None:
+        return
+    for name in ("mean", "std", "h", "ewma_limit", "ar_order"):
+        if len(mon[name]) != n_outputs:
+            raise ValueError(f"monitor.{name}: {len(mon[name])} values for {n_outputs} outputs")
 
 
 def _reject_constant(name: str):
@@ -154,6 +170,7 @@ def read_model_file(path) -> ModelFile:
             raise ValueError(f"model.{exc.args[0]}: missing") from None
         except TypeError as exc:
             raise ValueError(f"model: wrong type ({exc})") from None
+        _check_monitor(doc, model.n_outputs_)
         if len(doc["inputs"]) != model.n_inputs_ or len(doc["outputs"]) != model.n_outputs_:
             raise ValueError(f"inputs, outputs: {len(doc['inputs'])} and {len(doc['outputs'])} "
                              f"names for a model with {model.n_inputs_} inputs and "
@@ -163,7 +180,7 @@ def read_model_file(path) -> ModelFile:
     return ModelFile(model=model, kind=doc["kind"], inputs=list(doc["inputs"]),
                      outputs=list(doc["outputs"]),
                      smoothing_passes=int(doc["preprocessing"]["smoothing_passes"]),
-                     meta=doc["meta"], sha256=digest)
+                     meta=doc["meta"], sha256=digest, monitor=doc.get("monitor"))
 
 
 def load_model(path) -> Model:
