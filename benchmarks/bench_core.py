@@ -20,8 +20,9 @@ def lm_epoch() -> dict:
     """One LM epoch at the paper's size: the core on 1 and 2 threads against the structured numpy
     LM (numpy_baselines.train_lm_structured, J never formed) with BLAS pinned to the same thread
     count (on 2 threads: the faster of BLAS on 2 and on 1, OpenBLAS spins on a loaded machine),
-    times the whole run over its epochs + 1 J'J evaluations; the old reference (cdam_core.reference.train_lm, forms the 80,000 x 308 J, BLAS
-    unpinned) as an extra column. 1 thread: thread CPU time; 2 threads: wall; best of 5.
+    times the whole run over its epochs + 1 J'J evaluations; the old reference
+    (cdam_core.reference.train_lm, forms the 80,000 x 308 J, BLAS unpinned) as an extra column.
+    1 thread: thread CPU time; 2 threads: wall; best of 5.
     Bound: the structured J'J's FLOPs at numpy's single-core DGEMM rate measured in this run."""
     from cdam_core import _core, reference
     from numpy_baselines import jtj_structured, structured_macs, train_lm_structured
@@ -124,7 +125,8 @@ def smoothing() -> dict:
     t_sg = best_of(sg, 3)
     return {"ratio": t_ref / t_core, "seconds": t_core,
             "reference": "reference.five_point_cubic_smooth (vectorised numpy)",
-            "reference_seconds": t_ref, "savgol_seconds": t_sg, "ratio_vs_savgol": t_sg / t_core, "shape": list(y.shape),
+            "reference_seconds": t_ref, "savgol_seconds": t_sg, "ratio_vs_savgol": t_sg / t_core,
+            "shape": list(y.shape),
             "passes": passes}
 
 

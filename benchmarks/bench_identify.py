@@ -81,9 +81,10 @@ def iboa_bp() -> dict:
 def fitness_eval() -> dict:
     """20 BP fitness evaluations (6-20-8 over 10,000 samples): the core on 1 and 2 threads
     against the faster of two vectorised numpy passes (all 20 networks batched, or one at a
-    time), BLAS pinned to the same thread count (on 2: the faster of BLAS on 2 and on 1); the old reference (BpObjective, one network at
-    a time, BLAS unpinned) as an extra column. Bound: the 280 multiply-adds per sample at the
-    single-core DGEMM rate (tanh not counted: a lower bound)."""
+    time), BLAS pinned to the same thread count (on 2: the faster of BLAS on 2 and on 1); the
+    old reference (BpObjective, one network at a time, BLAS unpinned) as an extra column.
+    Bound: the 280 multiply-adds per sample at the single-core DGEMM rate (tanh not counted: a
+    lower bound). 1 thread: thread CPU time; 2 threads: wall; best of 5-7."""
     from cdam_core import _core
     from cdam_core.reference.optimisers import BpObjective
     from numpy_baselines import fitness_batched, fitness_loop
