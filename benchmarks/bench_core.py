@@ -4,6 +4,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import time
 
 import numpy as np
 
@@ -113,8 +114,9 @@ def smoothing() -> dict:
 
     y = np.random.default_rng(0).standard_normal((20_000, 14))
     passes = 10
-    t_core = best_of(lambda: _core.five_point_cubic_smooth(y, passes), 3)
-    t_ref = best_of(lambda: reference.five_point_cubic_smooth(y, passes), 3)
+    clk = time.thread_time   # all three run on the calling thread: its CPU time, best of 5
+    t_core = best_of(lambda: _core.five_point_cubic_smooth(y, passes), 5, clk)
+    t_ref = best_of(lambda: reference.five_point_cubic_smooth(y, passes), 5, clk)
 
     def sg():
         z = y
@@ -122,12 +124,14 @@ def smoothing() -> dict:
             z = savgol_filter(z, 5, 3, mode="interp", axis=0)
         return z
 
-    t_sg = best_of(sg, 3)
-    return {"ratio": t_ref / t_core, "seconds": t_core,
-            "reference": "reference.five_point_cubic_smooth (vectorised numpy)",
-            "reference_seconds": t_ref, "savgol_seconds": t_sg, "ratio_vs_savgol": t_sg / t_core,
-            "shape": list(y.shape),
-            "passes": passes}
+    t_sg = best_of(sg, 5, clk)
+    fair = min(t_ref, t_sg)
+    which = "savgol_filter" if t_sg <= t_ref else "reference.five_point_cubic_smooth"
+    return {"ratio": fair / t_core, "seconds": t_core,
+            "reference": f"{which} (the faster of the two)",
+            "reference_seconds": fair, "numpy_reference_seconds": t_ref, "savgol_seconds": t_sg,
+            "ratio_vs_savgol": t_sg / t_core, "ratio_vs_numpy_reference": t_ref / t_core,
+            "shape": list(y.shape), "passes": passes}
 
 
 BENCHMARKS = {"lm_epoch": lm_epoch, "lm_memory": lm_memory, "smoothing": smoothing}
