@@ -5,13 +5,70 @@ std::tanh / std::exp from newlib (cdam::ExactActivation, fw_check_exact.elf) ove
 with the fast rational tanh (fw_check.elf); both measured in this run under QEMU -icount on the
 same 1,000 input vectors. Also printed: instructions of each, flash (text + data) of the model
 plus inference image, static RAM (data + bss) of the loop image, and the stack high-water mark.
+
+The instruction count against its bound (issue 23, item 6): a 6-20-8 inference has 280
+multiply-adds (120 hidden, 160 output) and 20 tanh. fast_tanh is compiled here alone with the
+firmware's flags and its unsaturated path counted from the disassembly: its arithmetic (x^2,
+9 FMAs, x p, the division), its test (compare, flag transfer, branch) and its coefficient loads.
+Two instruction bounds (6 input loads and 8 output stores included in both):
+- "vldr": each weight and bias one VLDR, each multiply-add one VFMA, the tanh coefficients kept
+  in registers (tanh = arithmetic + test);
+- "vldm": the same with the weights loaded 16 to a VLDM (the fewest instructions the M4F's 32
+  single registers allow).
+Beside them, for scale, the nano-drone benchmark's networks on an STM32F469 (Cortex-M4F,
+180 MHz) with ST Edge AI, from its repository's out/export/benchmark-results.csv as quoted in
+issue 23: cycles (measured on the board), not instructions (ours: QEMU -icount, a lower bound on
+the cycles), so the comparison is of scale only.
 """
 from __future__ import annotations
 
+import re
+import subprocess
 import tempfile
 import time
+from pathlib import Path
 
 from cdam_core import firmware as fw
+
+
+MACS, TANH = 6 * 20 + 20 * 8, 20
+WEIGHTS = 6 * 20 + 20 + 20 * 8 + 8
+ST_EDGE_AI = {"residual_mlp": {"cycles": 173_155, "macs": 18_840},   # 5 ReLU layers of 64
+              "lstm_step": {"cycles": 328_382, "macs": 23_946}}
+_FLAGS = ["-std=c++17", "-O3", "-funroll-loops", "-mcpu=cortex-m4", "-mthumb", "-mfloat-abi=hard",
+          "-mfpu=fpv4-sp-d16", "-fno-exceptions", "-fno-rtti"]
+
+
+def tanh_instructions(tmp) -> dict:
+    """Instructions on fast_tanh's unsaturated path, split into coefficient loads, the test and
+    the arithmetic (return not counted), from its disassembly compiled with the firmware's flags."""
+    inc = Path(__file__).resolve().parents[1] / "cpp" / "include"
+    src = Path(tmp) / "tanh_count.cpp"
+    src.write_text('#include "cdam/fast_math.hpp"\n'
+                   'float tanh_count(float x) { return cdam::fast_tanh(x); }\n')
+    obj = src.with_suffix(".o")
+    subprocess.run(["arm-none-eabi-g++", *_FLAGS, f"-I{inc}", "-c", str(src), "-o", str(obj)],
+                   check=True, capture_output=True)
+    dis = subprocess.run(["arm-none-eabi-objdump", "-d", "--no-show-raw-insn", str(obj)],
+                         check=True, capture_output=True, text=True).stdout
+    ops = re.findall(r"^\s+[0-9a-f]+:\s+([a-z][a-z0-9.]*)\s*(.*)$", dis, re.M)
+    path = []
+    for op, args in ops:               # the fall-through path up to the first return
+        if op == "bx":
+            break
+        path.append((op, args))
+    loads = sum(op == "vldr" and "[pc" in a for op, a in path)
+    test = sum(op.startswith(("vcmp", "vmrs", "b")) for op, _ in path)
+    return {"loads": loads, "test": test, "arithmetic": len(path) - loads - test,
+            "total": len(path)}
+
+
+def instruction_bounds(tanh: dict) -> dict:
+    tanh_regs = tanh["arithmetic"] + tanh["test"]
+    io = 6 + 8
+    vldr = MACS + WEIGHTS + TANH * tanh_regs + io
+    vldm = MACS + -(-WEIGHTS // 16) + TANH * tanh_regs + io
+    return {"bound_vldr": vldr, "bound_vldm": vldm}
 
 
 def bench_inference() -> dict:
@@ -23,12 +80,16 @@ def bench_inference() -> dict:
         rep = fw.check(model, build_dir=tmp)
         fm = fw.load_firmware_model(model)
         exact = fw.run_equivalence(tmp, fm, fw.default_inputs(fm), image="fw_check_exact")
+        tanh = tanh_instructions(tmp)
     secs = time.perf_counter() - t0
     fast_ipi = rep["instructions_per_inference"]
     infer = rep["inference_image"]
     out = {
         "ratio": exact["instructions_per_inference"] / fast_ipi,
-        "seconds": secs,
+        # one instruction a cycle at 168 MHz (a lower bound on the time); building took secs
+        "seconds": fast_ipi / 168e6,
+        "reference_seconds": exact["instructions_per_inference"] / 168e6,
+        "build_seconds": secs,
         "instructions_per_inference": fast_ipi,
         "instructions_per_inference_exact_tanh": exact["instructions_per_inference"],
         "instructions_per_prediction": rep["instructions_per_prediction"],
@@ -39,7 +100,18 @@ def bench_inference() -> dict:
         "loop_text": rep["text"],
         "stack_bytes": rep["stack_bytes"],
         "heap_free": rep["heap_free"],
+        "multiply_adds": MACS, "tanh_calls": TANH,
+        "instructions_per_multiply_add": fast_ipi / MACS,
+        "tanh_path_instructions": tanh["total"], "tanh_coefficient_loads": tanh["loads"],
+        "tanh_test_instructions": tanh["test"], "tanh_arithmetic_instructions": tanh["arithmetic"],
+        **instruction_bounds(tanh),
+        **{f"st_edge_ai_{k}_cycles_per_multiply_add": v["cycles"] / v["macs"]
+           for k, v in ST_EDGE_AI.items()},
+        "us_168mhz_one_instruction_a_cycle": fast_ipi / 168.0,
     }
+    out["over_bound"] = fast_ipi / out["bound_vldr"]
+    out["bound_seconds"] = out["bound_vldr"] / 168e6
+    out["reference"] = "same image with newlib tanhf (instructions)"
     print("firmware: " + ", ".join(f"{k}={v}" for k, v in out.items()))
     return out
 

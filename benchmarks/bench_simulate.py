@@ -1,5 +1,10 @@
 """Benchmark of issue 3: 30 s of the full coupled closed-loop system at 1 kHz (C++ core)
-against the numpy reference integrator, in the same run. Target: <= 0.2 s and >= 50x."""
+against the numpy reference integrator, in the same run. Target: <= 0.2 s and >= 50x.
+
+There is no fair numpy reference: the closed loop is sequential in time (each tick's control
+law and cable coupling depend on the state of the previous tick), so numpy cannot vectorise
+it, and the reference integrator is an interpreted per-tick loop. Its ratio is reported as the
+old ratio only ("ratio" is None); a fair one needs a compiled reference (none is written)."""
 from __future__ import annotations
 
 import time
@@ -22,7 +27,7 @@ def simulate() -> dict:
     best, best_cpu = float("inf"), float("inf")
     for _ in range(5):
         w, c = time.perf_counter(), time.process_time()
-        run_closed_loop(P, C, x0, sp, dt, ns, "core")
+        run_closed_loop(P, C, x0, sp, dt, ns)
         best = min(best, time.perf_counter() - w)
         best_cpu = min(best_cpu, time.process_time() - c)
     n_ref = 500   # the reference is slow: time 0.5 s of flight and scale per simulated second
@@ -32,7 +37,9 @@ def simulate() -> dict:
     core_per_s = best / (n * dt)
     return {"seconds": best, "cpu_seconds": best_cpu, "simulated_seconds": n * dt,
             "substeps": ns, "reference_seconds_per_simulated_second": ref_per_s,
-            "ratio": ref_per_s / core_per_s, "target_seconds": 0.2, "target_ratio": 50.0}
+            "ratio": None, "reference": "none fair (sequential in time; see the docstring)",
+            "old_reference": "reference.simulate_closed_loop (per-tick Python loop)",
+            "old_ratio": ref_per_s / core_per_s, "target_seconds": 0.2, "target_ratio": 50.0}
 
 
 BENCHMARKS = {"simulate": simulate}

@@ -3,9 +3,14 @@
     python benchmarks/run.py [--only NAME[,NAME...]] [--json FILE] [--list]
 
 Each benchmarks/bench_*.py module defines ``BENCHMARKS = {name: fn}``; fn() returns a dict with
-at least "ratio" (the core's speed over a reference run in the same process, >1 is faster) and
-"seconds" (the core's time), plus its own figures. Prints a table; --json writes
-{NAME: {...}}. Machines here are noisy: read the ratios, not the absolute times.
+at least "ratio" (the core's speed over the fairest reference we could write, run in the same
+process, >1 is faster; None when there is no fair one) and "seconds" (the core's time), and
+where it has them "reference" (what the reference is) and "reference_seconds", "old_ratio" and
+"old_reference" (the earlier, less careful reference), "bound_seconds" and "over_bound" (the
+core's time over a lower bound, e.g. the FLOPs at numpy's single-core DGEMM rate measured in the
+same run), plus its own figures. Every entry also records the CPU model, the SIMD level and the
+load averages before and after it (the machine may be shared: the figures are best-of-N, thread
+CPU time on one thread). Prints a table and the details; --json writes {NAME: {...}}.
 """
 from __future__ import annotations
 
@@ -17,6 +22,9 @@ import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))   # the bench modules import timing.py and numpy_baselines.py
+
+from timing import machine  # noqa: E402
 
 
 def discover() -> dict:
@@ -50,17 +58,40 @@ def main(argv=None) -> int:
     results = {}
     for name in names:
         print(f"running {name} ...", file=sys.stderr, flush=True)
+        before = machine()
         t = time.perf_counter()
         res = benches[name]()
         res.setdefault("wall_seconds", time.perf_counter() - t)
+        res["machine"] = {**before, "load_average_after": machine()["load_average"]}
         results[name] = res
-    print(f"\n{'benchmark':<16} {'ratio':>8} {'seconds':>10}  details")
-    for name, r in results.items():
-        extra = ", ".join(f"{k}={_fmt(v)}" for k, v in r.items() if k not in ("ratio", "seconds", "wall_seconds"))
-        print(f"{name:<16} {_fmt(r.get('ratio')):>8} {_fmt(r.get('seconds')):>10}  {extra}")
+    _print_table(results)
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=1))
     return 0
+
+
+_COLUMNS = ("ratio", "seconds", "reference", "reference_seconds", "over_bound", "old_ratio",
+            "old_reference", "machine", "wall_seconds")
+
+
+def _print_table(results: dict) -> None:
+    m = next(iter(results.values()), {}).get("machine", machine())
+    print(f"\nCPU {m['cpu']} ({m['simd']}, {m['cores']} cores)")
+    print(f"{'benchmark':<18} {'ratio':>7} {'core s':>10} {'ref s':>10} {'/bound':>7} "
+          f"{'old':>7} {'load':>11}  fairest reference")
+    for name, r in results.items():
+        if not r or "machine" not in r or len(r) <= 2:
+            print(f"{name:<18} (not run: tools missing)")
+            continue
+        load = f"{r['machine']['load_average'][0]:.2f}-{r['machine']['load_average_after'][0]:.2f}"
+        print(f"{name:<18} {_fmt(r.get('ratio')):>7} {_fmt(r.get('seconds')):>10} "
+              f"{_fmt(r.get('reference_seconds', '-')):>10} {_fmt(r.get('over_bound', '-')):>7} "
+              f"{_fmt(r.get('old_ratio', '-')):>7} {load:>11}  {r.get('reference', '-')}")
+    print()
+    for name, r in results.items():
+        extra = ", ".join(f"{k}={_fmt(v)}" for k, v in r.items() if k not in _COLUMNS)
+        if extra:
+            print(f"{name}: {extra}")
 
 
 def _fmt(v):
