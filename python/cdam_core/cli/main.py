@@ -16,6 +16,7 @@ COMMANDS = [
     "identify",
     "residual",
     "evaluate",
+    "batch",
     "export_firmware",
     "firmware",
     "can_log",
