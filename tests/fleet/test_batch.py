@@ -46,7 +46,7 @@ def _spec(folder, **kw):
     doc = {"command": "identify", "records": ["recs/*.csv"], "algorithms": ["bp", "iboa"],
            "seeds": 2, "folds": 2, "options": OPTIONS, **kw}
     (folder / "spec.json").write_text(json.dumps(doc))
-    return load_spec(folder / "spec.json")
+    return load_spec(folder / "spec.json", base=folder)
 
 
 @pytest.fixture(scope="module")
@@ -177,8 +177,8 @@ def test_cli_bad_spec_is_one_line_exit_2(folder):
 
 def test_cli_local_cluster_runs_and_reports_the_failed_record(folder):
     _spec(folder, algorithms=["bp"], seeds=1, folds=1)
-    r = subprocess.run([sys.executable, "-m", "cdam_core", "batch", str(folder / "spec.json"),
-                        "--out", str(folder / "o"), "--workers", "2", "--quiet"],
+    r = subprocess.run([sys.executable, "-m", "cdam_core", "batch", "spec.json",
+                        "--out", "o", "--workers", "2", "--quiet"], cwd=folder,
                        capture_output=True, text=True, env=os.environ.copy(), timeout=300)
     assert r.returncode == 1, r.stderr          # done, but incomplete
     assert "2 of 3 task(s) done" in r.stdout and "bad.csv" in r.stdout

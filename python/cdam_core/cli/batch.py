@@ -6,7 +6,8 @@ from cdam_core.cli.common import (CliError, CliIOError, add_outputs, check_io, n
 
 SPEC_HELP = """spec (JSON):
   {"command": "identify" | "evaluate" | "crossfold",
-   "records": ["flights/*.csv"],          globs, relative to the spec's folder
+   "records": ["flights/*.csv"],          globs, relative to the current folder
+                                          ("shared:nanodrone/*.parquet": shared data)
    "algorithms": ["iboa", "bp"],          identify (default ["iboa"])
    "seeds": 10,                           identify: seed indices 0..N-1
    "seed_rule": "index" | "derived",      seed = index (as cdam identify --seeds), or a
@@ -69,9 +70,10 @@ def run(args) -> int:
             cluster = local_cluster(spec.command, args.workers)
             client = Client(cluster)
         try:
-            where = client.dashboard_link if cluster is None or args.scheduler else "in process"
-            note(args, f"{len(tasks)} task(s) on {len(client.scheduler_info()['workers'])} "
-                       f"worker(s) ({where})")
+            workers = client.scheduler_info()["workers"].values()
+            note(args, f"{len(tasks)} task(s) on {len(workers)} worker(s), "
+                       f"{sum(w.get('nthreads', 1) for w in workers)} thread(s); dashboard: "
+                       f"{client.dashboard_link}")
             rows = run_batch(spec, args.out, client, progress=show_progress(args))
         finally:
             client.close()

@@ -1,7 +1,9 @@
 """The batch spec: a JSON object naming a command, a glob of records and the grid to run.
 
     {"command": "identify",                  # identify | evaluate | crossfold
-     "records": ["flights/*.csv"],           # globs, relative to the spec's folder
+     "records": ["flights/*.csv"],           # globs, relative to the current folder;
+                                             # "shared:nanodrone/*.parquet": in the shared
+                                             # data folder (record.realdata.shared_data_dir)
      "algorithms": ["iboa", "bp"],           # identify only (default ["iboa"])
      "seeds": 10,                            # identify: seed indices 0..N-1 (default 1)
      "seed_rule": "index",                   # index: seed = index (as `cdam identify --seeds`);
@@ -10,6 +12,9 @@
                                              # crossfold: list of test types (default all four)
      "model": "model.json",                  # evaluate only: the model file scored on each record
      "options": {...}}                       # the command's options (OPTIONS below)
+
+Records are stored as absolute paths, so that workers started elsewhere (a `dask worker`
+on another machine sharing the file system) read the same files.
 
 Tasks are the product records x algorithms x seed indices x folds, in that order; a task's
 seed depends on the task alone (never on the worker that runs it), so any number of workers
@@ -26,6 +31,7 @@ from __future__ import annotations
 import glob
 import hashlib
 import json
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -124,14 +130,15 @@ def derived_seed(record: str, algorithm, seed_index: int, fold) -> int:
     return int.from_bytes(hashlib.sha256(text).digest()[:4], "little")
 
 
-def load_spec(path) -> BatchSpec:
-    """Read and check a spec file (JSON); globs are relative to its folder."""
+def load_spec(path, base=".") -> BatchSpec:
+    """Read and check a spec file (JSON); globs are relative to ``base`` (default: the
+    current folder)."""
     path = Path(path)
     try:
         doc = json.loads(path.read_text(encoding="utf-8"))
     except json.JSONDecodeError as exc:
         raise ValueError(f"{path}: not valid JSON ({exc})") from None
-    return parse_spec(doc, base=path.parent)
+    return parse_spec(doc, base=base)
 
 
 def _int(doc, name, default, low):
@@ -160,11 +167,15 @@ def parse_spec(doc, base=".") -> BatchSpec:
         raise ValueError("spec.records: expected a glob or a non-empty list of globs")
     records = []
     for g in globs:
-        pattern = g if Path(g).is_absolute() else str(base / g)
+        if g.startswith("shared:"):
+            from cdam_core.record.realdata import shared_data_dir
+            pattern = str(shared_data_dir() / g[len("shared:"):])
+        else:
+            pattern = g if Path(g).is_absolute() else str(base / g)
         found = sorted(glob.glob(pattern))
         if not found:
             raise ValueError(f"spec.records: {g!r} matches no file (from {base})")
-        records += [f for f in found if f not in records]
+        records += [f for f in map(os.path.abspath, found) if f not in records]
     algorithms = doc.get("algorithms", ["iboa"])
     if isinstance(algorithms, str):
         algorithms = [algorithms]
@@ -192,7 +203,7 @@ def parse_spec(doc, base=".") -> BatchSpec:
     if command == "evaluate":
         if not isinstance(model, str):
             raise ValueError("spec.model: evaluate needs the model file")
-        model = model if Path(model).is_absolute() else str(base / model)
+        model = os.path.abspath(model if Path(model).is_absolute() else base / model)
         if not Path(model).is_file():
             raise ValueError(f"spec.model: no such file {model!r}")
     elif model is not None:
