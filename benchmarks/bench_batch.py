@@ -54,7 +54,7 @@ def batch_scaling() -> dict:
             "command": "identify", "records": ["recs/*.csv"], "algorithms": ["iboa", "bp"],
             "seeds": 3, "options": {"hidden": 20, "iterations": 50, "population": 20,
                                     "epochs": 50, "goal": 0.0, "threads": 1}}))
-        spec = load_spec(d / "spec.json")
+        spec = load_spec(d / "spec.json", base=d)
         tasks = spec.tasks()
         res["tasks"] = len(tasks)
         t = time.perf_counter()
