@@ -183,3 +183,27 @@ def test_cli_local_cluster_runs_and_reports_the_failed_record(folder):
     assert r.returncode == 1, r.stderr          # done, but incomplete
     assert "2 of 3 task(s) done" in r.stdout and "bad.csv" in r.stdout
     assert len(pd.read_parquet(folder / "o" / "results.parquet")) == 3
+
+
+def test_cli_interrupt_is_exit_130_and_keeps_the_completed_rows(folder):
+    """Ctrl-C while a task runs: exit 130, one line, the row that completed (the corrupt
+    record's error) written, the running task listed as cancelled."""
+    import signal
+    import time
+    _spec(folder, records=["recs/bad.csv", "recs/good0.csv"], algorithms=["iboa"], seeds=1,
+          folds=1, options={**OPTIONS, "iterations": 1000000})
+    with subprocess.Popen([sys.executable, "-m", "cdam_core", "batch", "spec.json", "--out", "o",
+                           "--workers", "1", "--quiet"], cwd=folder, stdout=subprocess.PIPE,
+                          stderr=subprocess.PIPE, text=True, env=os.environ.copy()) as p:
+        time.sleep(8.0)                       # past the imports and the cluster's start
+        p.send_signal(signal.SIGINT)
+        try:
+            out, err = p.communicate(timeout=60)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            raise
+    assert p.returncode == 130, err
+    assert err.strip().splitlines() == ["cdam batch: error: interrupted"]
+    t = pd.read_parquet(folder / "o" / "results.parquet")
+    assert list(t.status) == ["error", "cancelled"]
+    assert "bad.csv" in t.error[0]

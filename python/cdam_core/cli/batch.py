@@ -58,7 +58,10 @@ def run(args) -> int:
         note(args, f"{len(tasks)} task(s), serial")
         rows = run_batch(spec, args.out, progress=show_progress(args))
     else:
+        import logging
+
         from dask.distributed import Client
+        logging.getLogger("distributed").setLevel(logging.ERROR)   # our notes, not its log
         cluster = None
         if args.scheduler:
             try:
