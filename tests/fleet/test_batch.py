@@ -192,16 +192,16 @@ def test_cli_interrupt_is_exit_130_and_keeps_the_completed_rows(folder):
     import time
     _spec(folder, records=["recs/bad.csv", "recs/good0.csv"], algorithms=["iboa"], seeds=1,
           folds=1, options={**OPTIONS, "iterations": 1000000})
-    with subprocess.Popen([sys.executable, "-m", "cdam_core", "batch", "spec.json", "--out", "o",
-                           "--workers", "1", "--quiet"], cwd=folder, stdout=subprocess.PIPE,
-                          stderr=subprocess.PIPE, text=True, env=os.environ.copy()) as p:
+    p = subprocess.Popen([sys.executable, "-m", "cdam_core", "batch", "spec.json", "--out", "o",
+                          "--workers", "1", "--quiet"], cwd=folder, stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True, env=os.environ.copy())
+    try:
         time.sleep(8.0)                       # past the imports and the cluster's start
         p.send_signal(signal.SIGINT)
-        try:
-            out, err = p.communicate(timeout=60)
-        except subprocess.TimeoutExpired:
+        err = p.communicate(timeout=60)[1]
+    finally:
+        if p.poll() is None:
             p.kill()
-            raise
     assert p.returncode == 130, err
     assert err.strip().splitlines() == ["cdam batch: error: interrupted"]
     t = pd.read_parquet(folder / "o" / "results.parquet")
