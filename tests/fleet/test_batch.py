@@ -207,3 +207,31 @@ def test_cli_interrupt_is_exit_130_and_keeps_the_completed_rows(folder):
     t = pd.read_parquet(folder / "o" / "results.parquet")
     assert list(t.status) == ["error", "cancelled"]
     assert "bad.csv" in t.error[0]
+
+
+def test_evaluate_scores_a_saved_model_on_every_record(folder, client):
+    """evaluate: one row per record; the free-run RMSE recomputed here with numpy from the
+    model's own free-run prediction on the record as read and smoothed (1 pass)."""
+    import numpy as np
+
+    from cdam_core import load_model
+    from cdam_core.fleet.graph import run_batch
+    from cdam_core.preprocess import smooth_pair
+    from cdam_core.record.dataset import read_dataset
+    run_batch(_spec(folder, records=["recs/good0.csv"], algorithms=["bp"], seeds=1, folds=1),
+              folder / "fit")
+    model = folder / "fit" / "models" / "0000-good0-bp-s0-f0.json"
+    doc = {"command": "evaluate", "records": ["recs/*.csv"], "model": str(model)}
+    spec = parse_spec(doc, base=folder)
+    rows = run_batch(spec, folder / "ev", client)
+    assert [r["status"] for r in rows] == ["error", "ok", "ok"]
+    serial = run_batch(spec, folder / "ev_serial")
+    assert [{**r, "seconds": 0} for r in serial] == [{**r, "seconds": 0} for r in rows]
+    m = load_model(model)
+    for row in rows[1:]:
+        ds = read_dataset(row["record"])
+        U, Y = smooth_pair(ds.select(["u"]), ds.select(["y"]), OPTIONS["smoothing"])
+        P = m.predict(U, Y, mode="free_run")
+        e = (P[m.t0:, 0] - Y[m.t0:, 0])
+        assert row["free_run.y.rmse"] == pytest.approx(float(np.sqrt(np.mean(e ** 2))),
+                                                       rel=1e-12)
