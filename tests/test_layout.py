@@ -14,7 +14,7 @@ import pytest
 import cdam_core
 
 STAGES = ("base", "record", "sim", "preprocess", "models", "identify", "evaluate", "residual",
-          "report", "paper", "firmware", "cli")
+          "report", "paper", "fleet", "firmware", "cli")
 PKG = Path(cdam_core.__file__).resolve().parent
 
 

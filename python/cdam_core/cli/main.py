@@ -17,6 +17,7 @@ COMMANDS = [
     "residual",
     "evaluate",
     "monitor",
+    "batch",
     "export_firmware",
     "firmware",
     "can_log",

@@ -1,0 +1,91 @@
+"""`cdam batch SPEC`: one command over records x seeds x algorithms x folds on dask.distributed."""
+from __future__ import annotations
+
+from cdam_core.cli.common import (CliError, CliIOError, add_outputs, check_io, note,
+                                  show_progress)
+
+SPEC_HELP = """spec (JSON):
+  {"command": "identify" | "evaluate" | "crossfold",
+   "records": ["flights/*.csv"],          globs, relative to the current folder
+                                          ("shared:nanodrone/*.parquet": shared data)
+   "algorithms": ["iboa", "bp"],          identify (default ["iboa"])
+   "seeds": 10,                           identify: seed indices 0..N-1
+   "seed_rule": "index" | "derived",      seed = index (as cdam identify --seeds), or a
+                                          uint32 from (record, algorithm, index, fold)
+   "folds": 1,                            identify: 1 = --split; K > 1 = forward chaining;
+                                          crossfold: test types (default all four)
+   "model": "model.json",                 evaluate: the model scored on every record
+   "options": {"hidden": 20, "narx": [2, 2, 1], "epochs": 50, ...}}
+See cdam_core.fleet.spec for every option."""
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "batch", help="run identify/evaluate/crossfold over many records, seeds, algorithms "
+                      "and folds on Dask",
+        description="Expand SPEC into tasks (records x algorithms x seeds x folds), run them on "
+                    "dask.distributed: an in-process LocalCluster sized to this machine, or "
+                    "the cluster at --scheduler. Each worker reads its own records; the "
+                    "results are gathered into OUT/results.parquet and OUT/results.json (one "
+                    "row per task with every metric; a task that fails is listed with its "
+                    "error, the others complete) and the models into OUT/models/. Same "
+                    "answer whatever the number of workers, and as --serial.",
+        epilog=SPEC_HELP)
+    p.add_argument("spec", help="the batch spec (JSON)")
+    p.add_argument("--out", required=True, metavar="DIR",
+                   help="output folder (results.parquet, results.json, models/)")
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="address of a running dask scheduler (e.g. tcp://127.0.0.1:8786); "
+                        "default: a LocalCluster in this process")
+    g.add_argument("--serial", action="store_true",
+                   help="no Dask: run the tasks one after the other in this process")
+    p.add_argument("--workers", type=int, default=None,
+                   help="LocalCluster workers (default: one per core)")
+    add_outputs(p, json=False, report=False)
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from cdam_core.fleet.spec import load_spec
+    check_io(inputs=[("SPEC", args.spec)], folders=[("--out", args.out)])
+    if args.workers is not None and args.workers < 1:
+        raise CliError(f"--workers: must be >= 1, got {args.workers}")
+    spec = load_spec(args.spec)
+    tasks = spec.tasks()
+    from cdam_core.fleet.graph import local_cluster, run_batch
+    if args.serial:
+        note(args, f"{len(tasks)} task(s), serial")
+        rows = run_batch(spec, args.out, progress=show_progress(args))
+    else:
+        import logging
+
+        from dask.distributed import Client
+        logging.getLogger("distributed").setLevel(logging.ERROR)   # our notes, not its log
+        cluster = None
+        if args.scheduler:
+            try:
+                client = Client(args.scheduler, timeout="10s")
+            except (OSError, TimeoutError) as exc:
+                raise CliIOError(f"--scheduler: cannot reach {args.scheduler} "
+                                 f"({' '.join(str(exc).split())})") from None
+        else:
+            cluster = local_cluster(spec.command, args.workers)
+            client = Client(cluster)
+        try:
+            workers = client.scheduler_info()["workers"].values()
+            note(args, f"{len(tasks)} task(s) on {len(workers)} worker(s), "
+                       f"{sum(w.get('nthreads', 1) for w in workers)} thread(s); dashboard: "
+                       f"{client.dashboard_link}")
+            rows = run_batch(spec, args.out, client, progress=show_progress(args))
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+    failed = [r for r in rows if r["status"] != "ok"]
+    print(f"{len(rows) - len(failed)} of {len(rows)} task(s) done; table: "
+          f"{args.out}/results.parquet")
+    for r in failed:
+        print(f"  {r['task']}: {r['status']}: {r['error']}")
+    return 1 if failed else 0
+
