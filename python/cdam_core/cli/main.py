@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import importlib.util
+import os
 import sys
 
 from cdam_core import __version__
@@ -65,8 +66,49 @@ def _message(exc: BaseException) -> tuple[str, int]:
     return str(exc) or type(exc).__name__, 2
 
 
+class _PipeSafeStdout:
+    """stdout that goes quiet once its reader has gone (``cdam ... | head``): the command
+    still completes and writes its files; nothing is reported as an error."""
+
+    def __init__(self, stream):
+        self._s, self.broken = stream, False
+
+    def write(self, text):
+        if not self.broken:
+            try:
+                return self._s.write(text)
+            except BrokenPipeError:
+                self.broken = True
+        return len(text)
+
+    def flush(self):
+        if not self.broken:
+            try:
+                self._s.flush()
+            except BrokenPipeError:
+                self.broken = True
+
+    def __getattr__(self, name):
+        return getattr(self._s, name)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run one command; every failure is one stderr line and an exit code (see EXIT_CODES)."""
+    out = sys.stdout if isinstance(sys.stdout, _PipeSafeStdout) else _PipeSafeStdout(sys.stdout)
+    sys.stdout = out
+    try:
+        return _main(argv)
+    finally:
+        out.flush()
+        if out.broken:      # keep the interpreter's final flush from complaining
+            try:
+                os.dup2(os.open(os.devnull, os.O_WRONLY), out._s.fileno())
+            except (OSError, ValueError, AttributeError):
+                pass
+        sys.stdout = out._s
+
+
+def _main(argv: list[str] | None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
