@@ -71,7 +71,7 @@ def test_output_error_refinement_recovers_perturbed_parameters():
     f = fit(m, sig, (CoulombFriction("tau"),), 50)
     g = greybox_of(f, 1e-3)
     g.set_parameters({"M": 0.5 * 1.2, "Fv": 2.0 * 0.8, "coulomb_friction@tau.Fc": 1.0 * 1.2})
-    info = cv.refine(g, f, cv._inputs(f.effects), np.ones(cv.Y.shape[0], bool))
+    info = cv.refine(g, f, cv.inputs(f.effects), np.ones(cv.Y.shape[0], bool))
     assert g.theta_["M"] == pytest.approx(0.5, rel=0.01)
     assert g.theta_["Fv"] == pytest.approx(2.0, rel=0.01)
     assert g.theta_["coulomb_friction@tau.Fc"] == pytest.approx(1.0, rel=0.02)

@@ -49,7 +49,7 @@ def analyse(model: str, t, signals: dict, extra: dict | None = None, fixed: dict
     if cutoff_hz is not None or getattr(m, "parallel_filter", False):
         filt = DerivativeFilter(cutoff_hz=choice["chosen_hz"])
     else:   # chosen from the record (the flight models keep their documented bands)
-        filt, choice = choose_cutoff(m, t, signals, extra, dec)
+        filt, choice = choose_cutoff(m, t, signals, extra)
         trim = choice["trim_samples"]
         cands = at_rest(m, cands, choice, alpha)
         dec = [c for c in cands if c.name in set(declared)]

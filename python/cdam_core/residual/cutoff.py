@@ -59,8 +59,7 @@ def noise_cutoff(x, fs: float, lowest: float = 0.0) -> tuple[float, dict]:
                 "last_frequency_above_noise_hz": float(f[above[-1]]) if above.size else None}
 
 
-def choose_cutoff(model, t, raw: dict, extra: dict | None = None, declared_effects=(),
-                  order: int = 4) -> tuple[DerivativeFilter, dict]:
+def choose_cutoff(model, t, raw: dict, extra: dict | None = None, order: int = 4) -> tuple[DerivativeFilter, dict]:
     """Return (filter, report) for ``model`` on the record: one cut-off per position
     (:func:`noise_cutoff`); ``report`` holds each signal's evidence and the edge trim."""
     t = np.asarray(t, dtype=float)

@@ -26,7 +26,7 @@ __all__ = ["refine", "refined_fit"]
 MAX_EVALUATIONS = 80
 
 
-def refine(g, U, Y, starts, horizon: int, shooting, bounds: dict) -> tuple[dict, dict]:
+def refine(g, U, Y, starts, shooting, bounds: dict) -> tuple[dict, dict]:
     """Minimise the multiple-shooting error of GreyBox ``g`` (fitted) over its estimated
     parameters on the windows at ``starts``; ``shooting(g, U, Y, starts)`` returns each
     window's mean squared error after the initial-state projection. Returns (theta, info)."""
@@ -49,7 +49,7 @@ def refine(g, U, Y, starts, horizon: int, shooting, bounds: dict) -> tuple[dict,
 
     r0 = residual(x0)
     sol = least_squares(residual, x0, bounds=(lo, hi), diff_step=1e-4,
-                        max_nfev=MAX_EVALUATIONS, x_scale="jac")
+                        max_nfev=MAX_EVALUATIONS)
     theta = dict(zip(names, map(float, sol.x * scale)))
     g.set_parameters(theta)
     dof = max(sol.fun.size - len(names), 1)

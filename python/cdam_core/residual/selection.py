@@ -22,6 +22,8 @@ from scipy import optimize, stats
 
 from cdam_core.residual import diagnostics as dg
 from cdam_core.models.greybox.estimation import Fit, fit, free_run_error, set_equation_weights
+from cdam_core.residual.benchmark import greybox_of
+from cdam_core.residual.output_error import refined_fit
 from cdam_core.residual.validation import BlockedCV
 
 
@@ -245,8 +247,6 @@ def _choose_estimator(model, sig, current: Fit, cv, alpha: float) -> tuple[Fit, 
     """IDIM-LS or its output-error refinement (residual.output_error), whichever predicts
     held-out windows better (one-sided Wilcoxon at ``alpha``); the refinement is then run on
     the whole record."""
-    from cdam_core.residual.benchmark import greybox_of
-    from cdam_core.residual.output_error import refined_fit
     v = cv.compare((current.effects, model, "idim"), (current.effects, model, "oe"), 1, alpha)
     out = {"chosen": "IDIM-LS", "validation": v.to_json(),
            "rule": "output-error refinement by multiple shooting, kept if it predicts "
@@ -254,7 +254,7 @@ def _choose_estimator(model, sig, current: Fit, cv, alpha: float) -> tuple[Fit, 
     if not v.better:
         return current, out
     g = greybox_of(current, cv.dt)
-    info = cv.refine(g, current, cv._inputs(current.effects), np.ones(cv.Y.shape[0], bool))
+    info = cv.refine(g, current, cv.inputs(current.effects), np.ones(cv.Y.shape[0], bool))
     theta = {p: g.theta_[p] for p in current.estimated}
     out.update(chosen="output error (multiple shooting)", idim=dict(current.theta),
                refinement={k: v for k, v in info.items() if k != "std"})

@@ -38,6 +38,7 @@ from scipy import stats
 
 from cdam_core.models.greybox.estimation import design, fit
 from cdam_core.residual.benchmark import greybox_of
+from cdam_core.residual.output_error import refine
 
 __all__ = ["BlockedCV", "Comparison", "motion_horizon"]
 
@@ -120,19 +121,18 @@ class BlockedCV:
         # holding the last measurement, else held-out equation error
         self.criterion = "simulation"
         self.eq_norm = {}
-        self._fit_state = True
         if declared is not None:
             self.eq_norm = {eq: max(float(np.var(r)), 1e-300) for eq, r in declared.residuals.items()}
-            self._fit_state = False     # the rule reads windows from the measured state
-            e0, _ = self.scores(declared.effects)
-            self._fit_state = True
-            self._cache.clear()
+            # the rule reads windows from the measured state (no initial state fitted)
+            e0, _ = self.scores(declared.effects, fit_state=False)
             self.declared_window_score = float(np.mean(e0)) if np.all(np.isfinite(e0)) \
                 else float("nan")
             if not self.declared_window_score < 1.0:
                 self.criterion = "equation"
 
-    def _inputs(self, effects) -> np.ndarray:
+    def inputs(self, effects) -> np.ndarray:
+        """The record's input columns for a structure (the model's inputs, then the measured
+        columns its effects read), as ``GreyBox`` takes them."""
         m, s = self.model, self.sig
         cols = [np.asarray(s[c], dtype=float) for c in m.inputs]
         cols += [np.asarray(s["extra"][e.column], dtype=float) for e in effects
@@ -156,17 +156,19 @@ class BlockedCV:
             tot += r[rows] ** 2 / self.eq_norm.get(eq, 1.0)
         return np.mean(tot, axis=1) / max(len(eqs), 1)
 
-    def scores(self, effects=(), model=None, estimator: str = "idim") -> tuple[np.ndarray, str]:
+    def scores(self, effects=(), model=None, estimator: str = "idim",
+               fit_state: bool = True) -> tuple[np.ndarray, str]:
         """Per-window normalised squared errors over all folds (NaN windows where a fold's
         model could not be fitted or simulated) and the reason if any failed. ``estimator``
         "oe": each fold's IDIM estimate refined by output error on the fold's training windows
-        (:mod:`cdam_core.residual.output_error`; simulation criterion only)."""
+        (:mod:`cdam_core.residual.output_error`; simulation criterion only). ``fit_state``
+        False: windows start from the measured state as it is (the criterion's rule)."""
         model = self.model if model is None else model
         effects = tuple(effects)
-        key = self._key(model, effects) + (estimator,)
+        key = self._key(model, effects) + (estimator, fit_state)
         if key in self._cache:
             return self._cache[key]
-        U = self._inputs(effects)
+        U = self.inputs(effects)
         out, reason = [], ""
         n = self.Y.shape[0]
         for k in range(self.folds):
@@ -183,7 +185,7 @@ class BlockedCV:
                 starts = starts[starts >= g.t0 - 1]
                 if estimator == "oe":
                     self.refine(g, f, U, mask)
-                out.append(self._shooting(g, U[a:b], self.Y[a:b], starts))
+                out.append(self._shooting(g, U[a:b], self.Y[a:b], starts, fit_state))
             except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
                 reason = reason or f"fold {k + 1}: {exc}"
                 out.append(np.full(starts.size, np.nan))
@@ -201,51 +203,36 @@ class BlockedCV:
     def refine(self, g, f, U, mask) -> dict:
         """Output-error refinement of GreyBox ``g`` (from IDIM fit ``f``) on the windows of
         the rows in ``mask``; returns the refinement's report."""
-        from cdam_core.residual.output_error import refine
         bounds = dict(getattr(f.model, "bounds", {}) or {})
         for e in f.effects:
             bounds.update(e.bounds())
-        _, info = refine(g, U, self.Y, self.training_starts(mask), self.horizon,
-                         self._shooting, bounds)
+        _, info = refine(g, U, self.Y, self.training_starts(mask), self._shooting, bounds)
         return info
 
-    def _shooting(self, g, U, Y, starts) -> np.ndarray:
-        """Per-window normalised squared error with each window's initial state fitted."""
+    def _shooting(self, g, U, Y, starts, fit_state: bool = True) -> np.ndarray:
+        """Per-window normalised squared error, each window's initial state fitted (linearised
+        least squares, one batched simulation with every state component perturbed)."""
         H, m, W = self.horizon, Y.shape[1], starts.size
         x0 = Y[starts].astype(float)
         v0 = (Y[starts] - Y[starts - 1]) / self.dt
-        hx = 1e-6 * (1.0 + np.max(np.abs(x0), axis=0))
-        hv = 1e-6 * (1.0 + np.max(np.abs(v0), axis=0))
-        X0, V0 = [x0], [v0]
-        for j in range(m):            # perturbed starts, stacked into one batched simulation
-            e = np.zeros(m)
-            e[j] = hx[j]
-            X0.append(x0 + e)
-            V0.append(v0)
-        for j in range(m):
-            e = np.zeros(m)
-            e[j] = hv[j]
-            X0.append(x0)
-            V0.append(v0 + e)
-        if not self._fit_state:
-            P = g.windows(U, Y, starts, H, x0, v0)
-            idx = starts[None, :] + np.arange(1, H + 1)[:, None]
-            return np.mean((P - Y[idx]) ** 2 / self.norm, axis=(0, 2))
-        P = g.windows(U, Y, np.tile(starts, 2 * m + 1), H, np.vstack(X0), np.vstack(V0))
-        P = P.reshape(H, 2 * m + 1, W, m)
         idx = starts[None, :] + np.arange(1, H + 1)[:, None]
+        if not fit_state:
+            P = g.windows(U, Y, starts, H, x0, v0)
+            return np.mean((P - Y[idx]) ** 2 / self.norm, axis=(0, 2))
+        steps = 1e-6 * (1.0 + np.concatenate([np.max(np.abs(x0), axis=0),
+                                               np.max(np.abs(v0), axis=0)]))
+        dx = np.vstack([np.zeros((1, 2 * m)), np.diag(steps)])       # (1 + 2m, 2m)
+        X0 = np.concatenate([x0 + d[:m] for d in dx])
+        V0 = np.concatenate([v0 + d[m:] for d in dx])
+        P = g.windows(U, Y, np.tile(starts, 2 * m + 1), H, X0, V0).reshape(H, 2 * m + 1, W, m)
         scale = 1.0 / np.sqrt(self.norm)
-        r = (Y[idx] - P[:, 0]) * scale                              # (H, W, m)
-        steps = np.concatenate([hx, hv])
-        S = (P[:, 1:] - P[:, :1]) * scale / steps[None, :, None, None]   # (H, 2m, W, m)
+        r = (Y[idx] - P[:, 0]) * scale                                     # (H, W, m)
+        S = (P[:, 1:] - P[:, :1]) * scale / steps[None, :, None, None]     # (H, 2m, W, m)
         A = np.transpose(S, (2, 0, 3, 1)).reshape(W, H * m, 2 * m)
-        bvec = np.transpose(r, (1, 0, 2)).reshape(W, H * m)
-        err = np.empty(W)
-        for w in range(W):
-            d = np.linalg.lstsq(A[w], bvec[w], rcond=None)[0]
-            res = bvec[w] - A[w] @ d
-            err[w] = float(res @ res) / (H * m)
-        return err
+        b = np.transpose(r, (1, 0, 2)).reshape(W, H * m, 1)
+        # least squares per window, batched (numpy.linalg.lstsq's default singular-value cut)
+        res = b - A @ (np.linalg.pinv(A, rcond=np.finfo(float).eps * max(A.shape[1:])) @ b)
+        return np.sum(res[..., 0] ** 2, axis=1) / (H * m)
 
     def compare(self, simple, rich, tested: int, alpha: float) -> Comparison:
         """Is structure ``rich`` better than ``simple`` on held-out windows? Each is
