@@ -182,8 +182,8 @@ def _greybox(mf) -> StepFirmwareModel:
     if g.declared not in DECLARED_CODES:
         raise ValueError(f"MODEL: a greybox model of {g.declared!r} cannot run on the firmware "
                          f"yet (it runs {', '.join(DECLARED_CODES)})")
-    decl = g._m                                   # the declared model (read only)
-    inertia = np.asarray(g._inertia, np.float64)  # how the accelerations enter (read only)
+    decl = g.declared_model                       # the declared model
+    inertia = g.inertia                           # how the accelerations enter
     n, ni = len(decl.positions), len(decl.inputs)
     dt, sub = float(g.dt), int(g.substeps_)
     if not 1 <= sub <= MAX_SUBSTEPS:

@@ -306,6 +306,18 @@ class GreyBox(Model):
                 out[j] = x
         return out if path else x
 
+    @property
+    def declared_model(self):
+        """The declared model (a ``GreyBoxModel``) of the fitted grey box."""
+        self._check_fitted()
+        return self._m
+
+    @property
+    def inertia(self) -> np.ndarray:
+        """How the equation errors map to accelerations (a copy; see ``_accel``)."""
+        self._check_fitted()
+        return np.array(self._inertia, dtype=np.float64)
+
     def set_parameters(self, values: dict) -> "GreyBox":
         """Replace estimated parameter values (output-error refinement); returns self."""
         self._check_fitted()
