@@ -5,7 +5,7 @@ from test_residual_synth_data import FLEX, RIGID, flexible_joint_record, rigid_a
 
 from cdam_core.residual import fit, get_model, simulate
 from cdam_core.models.greybox.effects import CoulombFriction, candidates
-from cdam_core.models.greybox.estimation import free_run_error
+from cdam_core.models.greybox.freerun import free_run_error
 
 
 def test_rigid_axis_exact_on_analytic_signals():

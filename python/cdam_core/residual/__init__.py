@@ -5,7 +5,8 @@
 from cdam_core.residual.diagnostics import (autocorrelation, cross_correlation, effective_sample_size,
                           ljung_box, spectral_peaks, spectrum, whiteness)
 from cdam_core.models.greybox.effects import LIBRARY, Effect, candidates
-from cdam_core.models.greybox.estimation import Fit, apply_fit, fit, free_run_error, simulate
+from cdam_core.models.greybox.estimation import Fit, apply_fit, fit
+from cdam_core.models.greybox.freerun import free_run_error, simulate
 from cdam_core.models.greybox.flight import AerialManipulator, Quadrotor
 from cdam_core.models.greybox.declared import DerivativeFilter, FlexibleJoint, RigidAxis
 from cdam_core.models.greybox.registry import get_model

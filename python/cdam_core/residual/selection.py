@@ -21,7 +21,8 @@ import numpy as np
 from scipy import optimize, stats
 
 from cdam_core.residual import diagnostics as dg
-from cdam_core.models.greybox.estimation import Fit, fit, free_run_error, set_equation_weights
+from cdam_core.models.greybox.estimation import Fit, fit, set_equation_weights
+from cdam_core.models.greybox.freerun import free_run_error
 from cdam_core.residual.benchmark import greybox_of
 from cdam_core.residual.output_error import refined_fit
 from cdam_core.residual.validation import BlockedCV

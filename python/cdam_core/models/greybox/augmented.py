@@ -5,8 +5,9 @@ Inputs U: the declared model's inputs (``tau`` / ``tau_m`` / the rotor commands 
 the measured channels of its ``external_force`` effects (``extra_columns``); outputs Y: its
 positions. Sample time ``dt`` is part of the model (the effects shift and differentiate in time).
 
-Prediction integrates the equations forward (semi-implicit Euler, ``substeps`` per sample, as
-:func:`cdam_core.models.greybox.estimation.simulate`). The state at a row is the measured
+Prediction integrates the equations forward (semi-implicit Euler, ``substeps`` per sample; the
+one integrator of the grey-box models: :mod:`cdam_core.models.greybox.freerun` runs the residual
+loop's free runs through it). The state at a row is the measured
 position and the backward difference of the last two measured positions, so ``t0 = 2``: one-step
 predicts row t from rows t-2, t-1 and the input at t-1; k-step integrates k samples from the
 state at t-k, all windows at once; free run integrates the whole segment from its first two rows.
@@ -281,12 +282,13 @@ class GreyBox(Model):
         return {e.key: e.columns(s) for e in wanted}
 
     def _rollout(self, U, Y, starts: np.ndarray, steps: int, path: bool,
-                 x0=None, v0=None) -> np.ndarray:
+                 x0=None, v0=None, pre=None, t_start: float = 0.0) -> np.ndarray:
         """Integrate ``steps`` samples from the measured state at each row of ``starts`` (or
         from positions ``x0`` and velocities ``v0``, each (W, m)); returns the final positions
-        (W, m), or every step's (steps, W, m) with ``path``."""
+        (W, m), or every step's (steps, W, m) with ``path``. ``pre``: whole-record effect
+        columns (default: from the measured ``Y``); ``t_start``: the time of row 0 (s)."""
         u_all, ex_all = self._inputs(U)
-        pre_all = self._precomputed(U, Y)
+        pre_all = self._precomputed(U, Y) if pre is None else pre
         dt = float(self.dt)
         x = Y[starts].astype(float) if x0 is None else np.array(x0, dtype=float)
         v = (Y[starts] - Y[starts - 1]) / dt if v0 is None else np.array(v0, dtype=float)
@@ -296,7 +298,7 @@ class GreyBox(Model):
             k = starts + j
             u = {name: a[k] for name, a in u_all.items()}
             ex = {c: a[k] for c, a in ex_all.items()}
-            t = k * dt
+            t = t_start + k * dt
             for _ in range(self.substeps_):
                 v = v + h * self._accel(x, v, u, ex, k, t, pre_all)
                 x = x + h * v

@@ -98,7 +98,7 @@ class Quadrotor(GreyBoxModel):
     # body rates, the arm's yaw inertia, rotor-torque terms); a 10 ms rotor "delay" absorbed
     # 3.5 % of it on a clean flight, so a claim must remove at least 5 % of the residual.
     min_gain = 0.05
-    free_run_window = 1.0   # s; see estimation.free_run_error
+    free_run_window = 1.0   # s; see freerun.free_run_error
     friction_width_search = True   # coulomb_friction searches its tanh width (effects.py)
     # the four rotor commands reach the rotors through the same ESCs: one shared delay
     # (effects.ActuatorDelay with channel "rotors"), never one per command
