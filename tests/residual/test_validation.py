@@ -83,7 +83,9 @@ def test_output_error_choice_is_reported():
     m, sig = _prepared(rec, fc=40.0)
     sel = select(m, sig, [CoulombFriction("tau")], free_run=False, output_error=True)
     est = sel.settings["estimator"]
-    assert est["chosen"] in ("IDIM-LS", "output error (multiple shooting)")
-    assert 0.0 <= est["validation"]["p_value"] <= 1.0
+    assert est["chosen"] in ("IDIM-LS", "IDIM-IV", "output error (multiple shooting)")
+    assert set(est["validation"]) == {"IDIM-IV", "output error (multiple shooting)"}
+    for v in est["validation"].values():
+        assert 0.0 <= v["p_value"] <= 1.0 and v["structures_tried"] == 2
     for p, true in (("M", 0.5), ("Fv", 2.0)):
         assert sel.final.theta[p] == pytest.approx(true, rel=0.05), p

@@ -195,12 +195,11 @@ def write_report(sel: Selection, out_dir, title: str | None = None, source: str 
         lines += ["", "Declared terms the held-out data do not support (fixed at 0): "
                   + ", ".join(f"{d['term']} (p {d['p_value']:.2g})" for d in dropped) + "."]
     est = sel.settings.get("estimator") or {}
-    if "validation" in est:
-        v = est["validation"]
-        lines += ["", f"Estimator: {est['chosen']} (output-error refinement against IDIM-LS on "
-                  f"held-out windows: mean error {v['score_rich']:.3g} against "
-                  f"{v['score_simple']:.3g}, one-sided Wilcoxon p {v['p_value']:.2g} at level "
-                  f"{v['level']:.2g})."]
+    if est.get("validation"):
+        alts = "; ".join(f"{name}: mean error {v['score_rich']:.3g} against IDIM-LS's "
+                         f"{v['score_simple']:.3g}, one-sided Wilcoxon p {v['p_value']:.2g} at "
+                         f"level {v['level']:.2g}" for name, v in est["validation"].items())
+        lines += ["", f"Estimator: {est['chosen']} (alternatives on held-out windows: {alts})."]
     idf = sel.settings.get("identifiability")
     if idf and not idf.get("identifiable", True):
         lines += ["", f"Not identifiable as {idf.get('declared')}: {idf.get('fallback')}."]

@@ -24,6 +24,7 @@ from cdam_core.residual import diagnostics as dg
 from cdam_core.models.greybox.estimation import Fit, fit, set_equation_weights
 from cdam_core.models.greybox.freerun import free_run_error
 from cdam_core.residual.benchmark import greybox_of
+from cdam_core.residual.instrumental import iv_fit
 from cdam_core.residual.output_error import refined_fit
 from cdam_core.residual.validation import BlockedCV
 
@@ -244,20 +245,40 @@ def drop_unsupported_terms(model, sig, current: Fit, cv, alpha: float, trim: int
     return model, current, dropped
 
 
-def _choose_estimator(model, sig, current: Fit, cv, alpha: float) -> tuple[Fit, dict]:
-    """IDIM-LS or its output-error refinement (residual.output_error), whichever predicts
-    held-out windows better (one-sided Wilcoxon at ``alpha``); the refinement is then run on
-    the whole record."""
-    v = cv.compare((current.effects, model, "idim"), (current.effects, model, "oe"), 1, alpha)
-    out = {"chosen": "IDIM-LS", "validation": v.to_json(),
-           "rule": "output-error refinement by multiple shooting, kept if it predicts "
-                   "held-out windows better than IDIM-LS"}
-    if not v.better:
+ESTIMATORS = {"iv": "IDIM-IV", "oe": "output error (multiple shooting)"}
+
+
+def _choose_estimator(model, sig, current: Fit, cv, alpha: float, trim: int,
+                      output_error: bool) -> tuple[Fit, dict]:
+    """IDIM-LS, IDIM-IV (residual.instrumental) or, with ``output_error``, the output-error
+    refinement (residual.output_error): an alternative replaces IDIM-LS only when it predicts
+    held-out windows better (one-sided Wilcoxon at ``alpha`` / the number of alternatives
+    tried); of several that do, the one with the lower held-out error. The chosen estimator is
+    then run on the whole record."""
+    tried = ["iv"] + (["oe"] if output_error else [])
+    votes = {a: cv.compare((current.effects, model, "idim"), (current.effects, model, a),
+                           len(tried), alpha) for a in tried}
+    out = {"chosen": "IDIM-LS",
+           "validation": {ESTIMATORS[a]: v.to_json() for a, v in votes.items()},
+           "rule": "IDIM-LS unless an alternative estimator predicts held-out windows better "
+                   "(one-sided Wilcoxon, Bonferroni over the alternatives tried)"}
+    better = [a for a in tried if votes[a].better]
+    if not better:
         return current, out
+    best = min(better, key=lambda a: votes[a].score_rich)
+    U = cv.inputs(current.effects)
+    if best == "iv":
+        try:
+            f, info = iv_fit(current, sig, U, cv.horizon, trim)
+        except ValueError as exc:     # held out it worked; on the whole record it did not
+            out["iv"] = {"status": "unavailable", "reason": str(exc)}
+            return current, out
+        out.update(chosen=ESTIMATORS["iv"], idim=dict(current.theta), iv=info)
+        return f, out
     g = greybox_of(current, cv.dt)
-    info = cv.refine(g, current, cv.inputs(current.effects), np.ones(cv.Y.shape[0], bool))
+    info = cv.refine(g, current, U, np.ones(cv.Y.shape[0], bool))
     theta = {p: g.theta_[p] for p in current.estimated}
-    out.update(chosen="output error (multiple shooting)", idim=dict(current.theta),
+    out.update(chosen=ESTIMATORS["oe"], idim=dict(current.theta),
                refinement={k: v for k, v in info.items() if k != "std"})
     return refined_fit(current, theta, info["std"], sig), out
 
@@ -386,12 +407,14 @@ def select(model, sig: dict, candidates, alpha: float = 0.01, max_steps: int | N
         current = fit(model, sig, current.effects, trim, bounded=True)
         final_error = _errors(current, sig_fr, free_run, substeps, store, "final")
     estimator = {"chosen": "IDIM-LS"}
-    if output_error and cv is not None and cv.criterion == "simulation":
-        current, estimator = _choose_estimator(model, sig, current, cv, alpha)
-    elif output_error:
-        estimator["output_error"] = "not tried: needs held-out simulation windows"
+    if cv is not None and cv.criterion == "simulation":
+        current, estimator = _choose_estimator(model, sig, current, cv, alpha, trim,
+                                               output_error)
         if estimator["chosen"] != "IDIM-LS":
             final_error = _errors(current, sig_fr, free_run, substeps, store, "final")
+    else:
+        estimator["alternatives"] = ("not tried: IDIM-IV and output error need held-out "
+                                     "simulation windows")
     white = all(dg.whiteness(r, lags)["white"] for r in current.residuals.values())
     unexplained = []
     # above the derivative filter's band the equation error holds only the unfiltered

@@ -38,6 +38,7 @@ from scipy import stats
 
 from cdam_core.models.greybox.estimation import design, fit
 from cdam_core.residual.benchmark import greybox_of
+from cdam_core.residual.instrumental import iv_fit
 from cdam_core.residual.output_error import refine
 
 __all__ = ["BlockedCV", "Comparison", "motion_horizon"]
@@ -161,7 +162,8 @@ class BlockedCV:
         """Per-window normalised squared errors over all folds (NaN windows where a fold's
         model could not be fitted or simulated) and the reason if any failed. ``estimator``
         "oe": each fold's IDIM estimate refined by output error on the fold's training windows
-        (:mod:`cdam_core.residual.output_error`; simulation criterion only). ``fit_state``
+        (:mod:`cdam_core.residual.output_error`); "iv": IDIM-IV on the fold's rows
+        (:mod:`cdam_core.residual.instrumental`); both simulation criterion only. ``fit_state``
         False: windows start from the measured state as it is (the criterion's rule)."""
         model = self.model if model is None else model
         effects = tuple(effects)
@@ -183,7 +185,10 @@ class BlockedCV:
                     continue
                 g = greybox_of(f, self.dt)
                 starts = starts[starts >= g.t0 - 1]
-                if estimator == "oe":
+                if estimator == "iv":
+                    f, _ = iv_fit(f, self.sig, U, self.horizon, self.trim, rows=mask)
+                    g = greybox_of(f, self.dt)
+                elif estimator == "oe":
                     self.refine(g, f, U, mask)
                 out.append(self._shooting(g, U[a:b], self.Y[a:b], starts, fit_state))
             except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
