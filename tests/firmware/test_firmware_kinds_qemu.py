@@ -166,13 +166,21 @@ def test_simulated_arm_found_effect(tmp_path):
     assert res["heap_free"] and res["instructions_per_step"] <= STEP_BUDGET
 
 
-def test_cli_check_reports_every_figure(greybox, tmp_path):
+def test_cli_check_reports_every_figure(greybox, tmp_path, capsys):
     from cdam_core.cli.main import main
     path, bdir, _ = greybox
     out = tmp_path / "report.json"
-    assert main(["firmware", "check", str(path), "--json", str(out),
-                 "--build-dir", str(bdir)]) == 0
+    capsys.readouterr()
+    assert main(["firmware", "check", str(path), "--json", str(out), "--quiet",
+                 "--report", str(tmp_path / "rep"), "--build-dir", str(bdir)]) == 0
+    assert capsys.readouterr().err == ""                   # --quiet: no notes
     rep = json.loads(out.read_text())
+    # --report: the same figures as a page (Markdown and HTML) and results.json
+    page = (tmp_path / "rep" / "index.md").read_text()
+    assert f"instructions_per_step        {rep['instructions_per_step']}" in page
+    assert json.loads((tmp_path / "rep" / "results.json").read_text()) == rep
+    assert "<table>" not in page and "instructions_per_step" in \
+        (tmp_path / "rep" / "index.html").read_text()
     assert rep["kind"] == "greybox" and rep["heap_free"] is True
     assert {"flash_bytes", "static_ram_bytes", "instructions_per_step", "microseconds_168mhz",
             "max_abs_error", "max_abs_error_free_run", "output_span", "max_rel_error",
