@@ -76,8 +76,14 @@ def test_commands_run_as_written_in_a_plain_clone(clone):
     # the AR.Drone example: the record from the clone's data/, its numbers as the README says
     r = _bash(repo, env, _fenced("load_ardrone2"))
     assert r.returncode == 0, r.stderr[-2000:]
-    m = re.search(r"IBOA-BP +r (\S+) +NRMSE (\S+)", r.stdout)
-    assert m and f"mean r {m.group(1)} and NRMSE {m.group(2)}" in " ".join(README.split())
+    out, text = r.stdout, " ".join(README.split())
+    assert out.splitlines()[0] == "test record, free run, mean over 6 output(s):"
+    model = re.search(r"IBOA-BP +r (\S+) +NRMSE (\S+)", out).groups()
+    arx = re.search(r"ARX\(4, 4, 0\) +r (\S+) +NRMSE (\S+)", out).groups()
+    naive = re.search(r"naive +r +n/a +NRMSE (\S+)", out).group(1)
+    assert f"mean r {model[0]} and NRMSE {model[1]}" in text
+    assert f"NRMSE {float(naive):.2f}" in text
+    assert arx == model                       # "the same for the least-squares ARX" 
     # a hidden effect in a simulated flight: simulate, then the residual loop names it
     sim = _inline(".venv/bin/cdam simulate --experiment both")
     res = _inline(".venv/bin/cdam residual out/f.csv")

@@ -74,19 +74,6 @@ def _run_fenced(lang: str, must: str, tmp_path: Path) -> str:
     return r.stdout
 
 
-def test_ardrone_example_runs_and_prints_what_the_readme_says(tmp_path):
-    out = _run_fenced("bash", "ardrone2", tmp_path)
-    lines = out.splitlines()
-    assert lines[0] == "test record, free run, mean over 6 output(s):"
-    model = re.search(r"IBOA-BP +r (\S+) +NRMSE (\S+)", lines[1]).groups()
-    arx = re.search(r"ARX\(4, 4, 0\) +r (\S+) +NRMSE (\S+)", out).groups()
-    naive = re.search(r"naive +r +n/a +NRMSE (\S+)", out).group(1)
-    text = " ".join(README.split())
-    assert f"mean r {model[0]} and NRMSE {model[1]}" in text
-    assert f"NRMSE {float(naive):.2f}" in text
-    assert arx == model                       # "the same for the least-squares ARX"
-
-
 @pytest.mark.slow
 def test_first_use_snippet_runs_and_matches_its_explanation(tmp_path):
     out = _run_fenced("python", "simulate_flight", tmp_path)
