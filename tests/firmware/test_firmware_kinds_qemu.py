@@ -190,14 +190,15 @@ def test_cli_check_reports_every_figure(greybox, tmp_path, capsys):
     assert "load" not in json.dumps(rep)    # no name from the file in the report either
 
 
-def test_emps_axis_found_by_the_residual_loop(tmp_path):
-    """The model `cdam residual --save` writes for DATA_EMPS, checked on DATA_EMPS_PULSES."""
+def test_emps_axis_found_by_the_residual_loop(tmp_path, bundled_record):
+    """The model `cdam residual --save` writes for DATA_EMPS, checked on DATA_EMPS_PULSES
+    (both ship in data/: missing is a failure)."""
     from cdam_core.models.file import save_model
-    from cdam_core.record.realdata.emps import emps_path, load_emps
+    from cdam_core.record.realdata.emps import load_emps
     from cdam_core.residual.analyse import analyse
     from cdam_core.residual.benchmark import greybox_of
-    if not emps_path("DATA_EMPS").is_file():
-        pytest.skip(f"EMPS data not found at {emps_path('DATA_EMPS')}")
+    bundled_record("emps/DATA_EMPS.mat")
+    bundled_record("emps/DATA_EMPS_PULSES.mat")
     d = load_emps("DATA_EMPS")
     sel = analyse("rigid_axis", d["t"], {"tau": d["force"], "q": d["qm"]}, free_run=False)
     g = greybox_of(sel.final, float(np.mean(np.diff(d["t"]))))

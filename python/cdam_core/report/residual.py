@@ -214,8 +214,9 @@ def write_report(sel: Selection, out_dir, title: str | None = None, source: str 
                   "|---|---|---|---|---|"]
         for k, b in fjs["error_before"].items():
             a = fjs["error_after"][k]
-            lines.append(f"| {k} | {b['rmse']:.4g} | {100 * b['nrmse']:.2f} % | {a['rmse']:.4g} "
-                         f"| {100 * a['nrmse']:.2f} % |")
+            u = channel_unit(sel.model.name, k, units)
+            lines.append(f"| {k} | {b['rmse']:.4g} {u} | {100 * b['nrmse']:.2f} % | "
+                         f"{a['rmse']:.4g} {u} | {100 * a['nrmse']:.2f} % |")
         lines += ["", f"Evidence: ERR {ev['err']:.3g}, F = {ev['f_statistic']:.4g} on "
                   f"({ev['added_parameters']}, N_eff = {ev['n_eff']:.0f}) -> p = {ev['p_value']:.3g}, "
                   f"delta BIC {ev['delta_bic']:.4g}; Ljung-Box p before "
