@@ -1,7 +1,7 @@
 """The README works when pasted (issue 22 item 2): its commands call the project's venv
-(`.venv/bin/...`), write only into `out/` (ignored by git), never over tracked files; its
-fenced examples run as written, here with `.venv/bin/python` and `.venv/bin/cdam` replaced by
-this interpreter, in a scratch folder."""
+(`.venv/bin/...`), write only into `out/` (ignored by git), never over tracked files; the
+first-use snippet runs with this interpreter in a scratch folder. The fenced shell examples run
+as written in a plain clone in tests/test_fresh_clone.py."""
 import os
 import re
 import shlex
@@ -57,19 +57,12 @@ def test_commands_write_only_into_out():
 
 
 def _run_fenced(lang: str, must: str, tmp_path: Path) -> str:
-    """Run the fenced block of ``lang`` containing ``must`` in tmp_path as the README says."""
+    """Run the fenced python block containing ``must`` in tmp_path with this interpreter."""
+    assert lang == "python"
     body = next(b for lng, b in FENCES if lng == lang and must in b)
-    env = os.environ.copy()
     (tmp_path / "data").symlink_to(ROOT / "data")   # as from the checkout: its data/ beside
-    if lang == "python":
-        r = subprocess.run([sys.executable, "-c", body], cwd=tmp_path, capture_output=True,
-                           text=True, timeout=600, env=env)
-    else:
-        py = shlex.quote(sys.executable)
-        script = re.sub(r"\.venv/bin/(cdam|python)",
-                        lambda m: f"{py} -m cdam_core" if m.group(1) == "cdam" else py, body)
-        r = subprocess.run(["bash", "-ec", script], cwd=tmp_path, capture_output=True,
-                           text=True, timeout=600, env=env)
+    r = subprocess.run([sys.executable, "-c", body], cwd=tmp_path, capture_output=True,
+                       text=True, timeout=600, env=os.environ.copy())
     assert r.returncode == 0, r.stderr[-2000:]
     return r.stdout
 
