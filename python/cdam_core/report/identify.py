@@ -216,7 +216,8 @@ def write_report(comparison, directory, *, records: dict | None = None,
                           "| output | " + " | ".join(_LABEL[a] for a in algos) + " |",
                           "|---" * (len(algos) + 1) + "|"]
                 for out in names:
-                    lines.append(f"| {out} | " + " | ".join(
+                    label = _label(out, units) if metric == "rmse" else f"{out} [-]"
+                    lines.append(f"| {label} | " + " | ".join(
                         _fmt(summary[a]["records"][rec][mode][out][metric]) for a in algos) + " |")
     if result.get("rank_sum"):
         lines += ["", "## Does IBOA beat the others? (one-sided Mann-Whitney rank-sum, p < 0.05)",
