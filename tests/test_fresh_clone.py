@@ -119,3 +119,24 @@ def test_what_needs_the_shared_flights_says_they_are_absent(clone):
     skips = [ln for ln in r.stdout.splitlines() if ln.startswith("SKIPPED")]
     assert skips and all("nano-drone flights not found" in ln and "CDAM_SHARED_DATA" in ln
                          for ln in skips), r.stdout[-2000:]
+
+
+@pytest.mark.slow
+def test_first_use_snippet_runs_and_matches_its_explanation(clone):
+    """"In `.venv/bin/python`, from the repository root (about 30 s)": the snippet as written;
+    the README explains the printed correlations (near 1 one step ahead on the outputs that
+    move, near 0 on those that only hold noise, q1 and q2 drifting in free run)."""
+    repo, env = clone
+    body = next(b for lang, b in re.findall(r"^ *```(\w+)\n(.*?)^ *```", README, re.M | re.S)
+                if lang == "python" and "simulate_flight" in b)
+    r = subprocess.run([".venv/bin/python", "-c", body], cwd=repo, env=env, capture_output=True,
+                       text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-2000:]
+    corr = {}
+    for line in r.stdout.splitlines():
+        mode, _, rest = line.partition(" ")
+        corr[mode] = eval(rest, {})                  # the printed dict of r per output
+    assert min(corr["one_step"][o] for o in ("theta", "X", "q1", "q2")) > 0.99
+    assert max(abs(corr["one_step"][o]) for o in ("phi", "psi", "Y", "Z")) < 0.1
+    assert 0.5 < corr["free_run"]["q2"] < 0.8 and 0.15 < corr["free_run"]["q1"] < 0.45
+    assert (repo / "out" / "model.json").is_file()
