@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from cdam_core.base.jsonio import atomic_target
+from cdam_core.record.dataset import STANDARD_UNITS
 from cdam_core.report.page import write_page
 
 __all__ = ["horizon_table", "group_table", "write_horizon_report"]
@@ -53,7 +54,7 @@ def write_horizon_report(scores, folder, title: str, dt: float | None = None,
     ``folder``."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    units = units or {}
+    units = {**STANDARD_UNITS, **(units or {})}      # the dataset format's, else given
     x = np.asarray(scores.horizons, dtype=float) * (dt if dt else 1.0)
     _panels(folder / "rmse_vs_horizon.png", x, dt, scores.rmse,
             [f"RMSE {o} [{units.get(o, 'output units')}]" for o in scores.outputs])
