@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# The main job: set-up, then the paper's experiment on the built-in simulator with a report
-# (until the simulator lands: a demo that identifies a small known system end to end).
+# The main job: set-up (the package only: no firmware tools; no root needed when a compiler
+# and python3-venv are there; apt/pip output in build/setup.log), then the paper's experiment
+# on the built-in simulator with a report in reports/paper.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh

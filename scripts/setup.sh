@@ -1,32 +1,70 @@
 #!/usr/bin/env bash
-# Installs everything cdam_core needs on a fresh Debian 12 machine (apt packages included),
-# creates .venv and builds the package into it. Idempotent: a second run only rebuilds.
+# Sets up cdam_core on a Debian 12 machine: creates .venv and builds the package into it.
+#
+#   bash scripts/setup.sh              the package only: no root needed when a C++ compiler and
+#                                      python3-venv are there (Eigen comes from the PyPI package
+#                                      cmeel-eigen when the system has none; CMake and Ninja
+#                                      from PyPI)
+#   bash scripts/setup.sh --firmware   also the ARM toolchain with newlib, QEMU and Eigen for
+#                                      the firmware (`cdam firmware check`; about 2.4 GB, apt)
+#   bash scripts/setup.sh --tests      everything the test command needs: the firmware tools,
+#                                      doctest, headless Chromium (report pages) and .[test]
+#
+# apt and pip output goes to build/setup.log; the terminal gets one line a step. Missing apt
+# packages are installed with apt-get (as root, else through sudo); none missing, no root.
+# Idempotent: a second run only rebuilds.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-APT_PKGS=(build-essential cmake ninja-build pkg-config libeigen3-dev doctest-dev
-          python3-venv python3-dev
-          gcc-arm-none-eabi libnewlib-arm-none-eabi libstdc++-arm-none-eabi-newlib qemu-system-arm)
+FIRMWARE=0
+TESTS=0
+for a in "$@"; do
+  case "$a" in
+    --firmware) FIRMWARE=1 ;;
+    --tests) TESTS=1; FIRMWARE=1 ;;
+    *) echo "setup: unknown option $a (use --firmware or --tests)" >&2; exit 2 ;;
+  esac
+done
+
+mkdir -p build
+LOG="$PWD/build/setup.log"
+: > "$LOG"
+fail() { echo "setup: $1 failed; the last lines of $LOG:" >&2; tail -n 25 "$LOG" >&2; exit 1; }
+
+APT_PKGS=(g++ python3-venv python3-dev)
+[ $FIRMWARE -eq 1 ] && APT_PKGS+=(gcc-arm-none-eabi libnewlib-arm-none-eabi
+                                  libstdc++-arm-none-eabi-newlib qemu-system-arm libeigen3-dev)
+[ $TESTS -eq 1 ] && APT_PKGS+=(doctest-dev chromium-headless-shell)
 missing=()
 for p in "${APT_PKGS[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
 done
 if [ ${#missing[@]} -gt 0 ]; then
-  echo "setup: installing apt packages: ${missing[*]}"
+  echo "setup: apt packages: ${missing[*]}"
   SUDO=""
   [ "$(id -u)" -ne 0 ] && SUDO="sudo"
-  $SUDO apt-get update -qq
-  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
+  { $SUDO apt-get update -qq \
+    && DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -q --no-install-recommends \
+       "${missing[@]}"; } >> "$LOG" 2>&1 || fail "apt-get install"
 fi
 
 PY=${PYTHON:-python3}
 if [ ! -x .venv/bin/python ]; then
   echo "setup: creating .venv with $($PY --version)"
-  $PY -m venv .venv
+  $PY -m venv .venv >> "$LOG" 2>&1 || fail "python -m venv"
 fi
 VPIP=".venv/bin/python -m pip"
-$VPIP install -q --upgrade pip
-$VPIP install -q "scikit-build-core>=0.10" "pybind11>=2.12" cmake ninja
-echo "setup: building and installing cdam_core into .venv"
-$VPIP install -q --no-build-isolation -Cbuild-dir=build/release ".[test]"
-.venv/bin/python -c "import cdam_core, cdam_core._core; print('setup: cdam_core', cdam_core.__version__, 'ready')"
+EXTRA=""
+[ $TESTS -eq 1 ] && EXTRA="[test]"
+echo "setup: building and installing cdam_core$EXTRA into .venv (a few minutes the first time)"
+{ $VPIP install --upgrade pip \
+  && $VPIP install "scikit-build-core>=0.10" "pybind11>=2.12" "cmeel-eigen>=3.4" cmake ninja \
+  && $VPIP install --no-build-isolation -Cbuild-dir=build/release ".$EXTRA"; } >> "$LOG" 2>&1 \
+  || fail "pip install"
+.venv/bin/python -c "import cdam_core, cdam_core._core; print('setup: cdam_core', cdam_core.__version__, 'ready (log: build/setup.log)')"
+if [ $FIRMWARE -eq 1 ]; then
+  .venv/bin/python -c "
+from cdam_core.firmware import toolchain_available
+why = toolchain_available()
+print('setup: firmware tools ' + ('missing: ' + why if why else 'ready'))"
+fi

@@ -4,14 +4,17 @@
 # marked fuzz, run by hand: pytest -m fuzz tests/robust).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-bash scripts/setup.sh
+bash scripts/setup.sh --tests    # the firmware tools too: the firmware tests run here
 echo "== C++ unit tests (ctest)"
-.venv/bin/cmake -S . -B build/ctest -G Ninja -DCDAM_PYTHON=OFF -DCDAM_TESTS=ON > build/ctest.log 2>&1 \
+.venv/bin/cmake -S . -B build/ctest -G Ninja -DCDAM_PYTHON=OFF -DCDAM_TESTS=ON \
+  -DPython_EXECUTABLE="$PWD/.venv/bin/python" > build/ctest.log 2>&1 \
   || { cat build/ctest.log; exit 1; }
 .venv/bin/cmake --build build/ctest -j2 >> build/ctest.log 2>&1 || { cat build/ctest.log; exit 1; }
-(cd build/ctest && ../../.venv/bin/ctest --output-on-failure)
+(cd build/ctest && ../../.venv/bin/ctest --output-on-failure > ../ctest-run.log 2>&1) \
+  || { cat build/ctest-run.log; exit 1; }
+tail -n 3 build/ctest-run.log
 echo "== C++ unit tests and a hypothesis pass over _core under AddressSanitizer + UBSan"
 bash scripts/sanitize.sh
 echo "== Python tests (pytest)"
 # run from tests/ so that the installed cdam_core (not the source tree) is imported
-.venv/bin/python -m pytest -m "not fuzz" -q -p no:cacheprovider "$@" tests
+.venv/bin/python -m pytest -m "not fuzz" -q -rs -p no:cacheprovider "$@" tests   # -rs: why each skip

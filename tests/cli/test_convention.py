@@ -40,7 +40,7 @@ def _commands():
 
 # the commands that compute results (the others convert or record files)
 COMPUTING = ["cdam paper", "cdam identify", "cdam residual", "cdam evaluate", "cdam demo",
-             "cdam merge"]
+             "cdam merge", "cdam firmware check"]
 
 
 def test_every_default_is_shown_in_help():
@@ -113,3 +113,43 @@ def test_notes_and_progress_stay_off_stdout(tmp_path):
     assert "\r" not in r.stderr and "it/s" not in r.stderr        # no tqdm bar into a pipe
     q = _cdam(*base, "--quiet")
     assert q.returncode == 0 and q.stderr == ""
+
+
+class _Terminal:
+    """A stand-in for stderr on a terminal: records what is written."""
+
+    def __init__(self, tty: bool):
+        self.tty, self.text = tty, ""
+
+    def isatty(self):
+        return self.tty
+
+    def write(self, s):
+        self.text += s
+
+    def flush(self):
+        pass
+
+
+@pytest.mark.parametrize("tty,quiet", [(True, False), (True, True), (False, False)])
+def test_long_runs_show_elapsed_time_on_a_terminal_only(monkeypatch, tty, quiet):
+    """`cdam residual` (about a minute on EMPS) wraps its fit in elapsed_ticker: on a terminal
+    the task and the seconds elapsed, redrawn in place and erased at the end; nothing with
+    --quiet or into a pipe or file."""
+    import time
+    from types import SimpleNamespace
+    from cdam_core.cli.common import elapsed_ticker
+    err = _Terminal(tty)
+    monkeypatch.setattr(sys, "stderr", err)
+    with elapsed_ticker(SimpleNamespace(command="residual", quiet=quiet), "fitting",
+                        every=0.05):
+        time.sleep(0.4)
+    if tty and not quiet:
+        ticks = err.text.split("\r")[1:]
+        assert len(ticks) >= 3 and ticks[0] == "cdam residual: fitting ... 0 s elapsed"
+        assert err.text.endswith("\r\033[K")                  # the line erased at the end
+    else:
+        assert err.text == ""
+    src = (Path(__file__).resolve().parents[2] / "python" / "cdam_core" / "cli"
+           / "residual.py").read_text()
+    assert "with elapsed_ticker(args" in src

@@ -58,6 +58,8 @@ def test_cli_check_without_toolchain_exits_3_naming_it(monkeypatch, tmp_path, ca
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and err.startswith("cdam firmware: error:")
     assert "arm-none-eabi-gcc" in err and "apt-get install gcc-arm-none-eabi" in err
+    assert "bash scripts/setup.sh --firmware" in err       # the set-up step that installs them
+    assert "--firmware" in (Path(__file__).resolve().parents[2] / "scripts" / "setup.sh").read_text()
     assert not out.exists()
 
 

@@ -166,13 +166,21 @@ def test_simulated_arm_found_effect(tmp_path):
     assert res["heap_free"] and res["instructions_per_step"] <= STEP_BUDGET
 
 
-def test_cli_check_reports_every_figure(greybox, tmp_path):
+def test_cli_check_reports_every_figure(greybox, tmp_path, capsys):
     from cdam_core.cli.main import main
     path, bdir, _ = greybox
     out = tmp_path / "report.json"
-    assert main(["firmware", "check", str(path), "--json", str(out),
-                 "--build-dir", str(bdir)]) == 0
+    capsys.readouterr()
+    assert main(["firmware", "check", str(path), "--json", str(out), "--quiet",
+                 "--report", str(tmp_path / "rep"), "--build-dir", str(bdir)]) == 0
+    assert capsys.readouterr().err == ""                   # --quiet: no notes
     rep = json.loads(out.read_text())
+    # --report: the same figures as a page (Markdown and HTML) and results.json
+    page = (tmp_path / "rep" / "index.md").read_text()
+    assert f"instructions_per_step        {rep['instructions_per_step']}" in page
+    assert json.loads((tmp_path / "rep" / "results.json").read_text()) == rep
+    assert "<table>" not in page and "instructions_per_step" in \
+        (tmp_path / "rep" / "index.html").read_text()
     assert rep["kind"] == "greybox" and rep["heap_free"] is True
     assert {"flash_bytes", "static_ram_bytes", "instructions_per_step", "microseconds_168mhz",
             "max_abs_error", "max_abs_error_free_run", "output_span", "max_rel_error",
@@ -182,14 +190,15 @@ def test_cli_check_reports_every_figure(greybox, tmp_path):
     assert "load" not in json.dumps(rep)    # no name from the file in the report either
 
 
-def test_emps_axis_found_by_the_residual_loop(tmp_path):
-    """The model `cdam residual --save` writes for DATA_EMPS, checked on DATA_EMPS_PULSES."""
+def test_emps_axis_found_by_the_residual_loop(tmp_path, bundled_record):
+    """The model `cdam residual --save` writes for DATA_EMPS, checked on DATA_EMPS_PULSES
+    (both ship in data/: missing is a failure)."""
     from cdam_core.models.file import save_model
-    from cdam_core.record.realdata.emps import emps_path, load_emps
+    from cdam_core.record.realdata.emps import load_emps
     from cdam_core.residual.analyse import analyse
     from cdam_core.residual.benchmark import greybox_of
-    if not emps_path("DATA_EMPS").is_file():
-        pytest.skip(f"EMPS data not found at {emps_path('DATA_EMPS')}")
+    bundled_record("emps/DATA_EMPS.mat")
+    bundled_record("emps/DATA_EMPS_PULSES.mat")
     d = load_emps("DATA_EMPS")
     sel = analyse("rigid_axis", d["t"], {"tau": d["force"], "q": d["qm"]}, free_run=False)
     g = greybox_of(sel.final, float(np.mean(np.diff(d["t"]))))

@@ -82,6 +82,25 @@ def test_writes_every_promised_file(run):
     assert "<table>" in page and "Does IBOA beat BOA and CABC" in page
 
 
+def test_report_page_opens_in_a_browser_with_every_figure_captioned(run, tmp_path):
+    """Headless Chromium: all 16 figures of index.html load (none missing) and the screenshot
+    is drawn; each figure has its caption under it."""
+    import sys
+    from pathlib import Path
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "report"))
+    from _browser import browser, captions_follow_figures, open_page
+    browser()
+    out, res = run
+    figs = res["files"]["preprocessing"] + res["files"]["convergence"] + res["files"]["identified"]
+    got = open_page(out / "index.html", tmp_path / "paper.png")
+    assert got["missing"] == [] and got["images"] == len(figs) == 16
+    assert got["shot_std"] > 0.01
+    page = (out / "index.html").read_text()
+    assert captions_follow_figures(page)
+    for n in range(8, 16):
+        assert f"<em>Figure {n}:" in page, n
+
+
 def test_tables_hold_the_published_values(run):
     out, res = run
     tables = _tables((out / "index.md").read_text())

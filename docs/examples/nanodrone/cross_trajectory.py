@@ -37,9 +37,16 @@ def main(argv=None) -> int:
                     help="test trajectory types, comma-separated (default: all four)")
     ap.add_argument("--data", default=None, help="folder of the flights (default: shared data)")
     args = ap.parse_args(argv)
+    try:
+        files = nanodrone_files(args.data)
+    except FileNotFoundError as exc:
+        # a plain clone: the flights are not in the repository (no licence file to ship them)
+        print(f"cross_trajectory.py: error: the nano-drone flights are not in the repository "
+              f"(no licence file), they live in a shared folder: {exc}; set CDAM_SHARED_DATA "
+              f"to the folder holding nanodrone/ (or give --data)", file=sys.stderr)
+        return 3
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    files = nanodrone_files(args.data)
     loaded, folds, md = {}, [], ["# Nano-drone flights: train on three trajectory types, test "
                                  "on the fourth", "",
                                  "Produced by `python docs/examples/nanodrone/cross_trajectory.py"

@@ -13,7 +13,7 @@ from cdam_core.base.orders import parse_orders
 
 __all__ = ["CliError", "CliIOError", "EXIT_CODES", "CdamParser", "HelpFormatter",
            "add_outputs", "check_io", "parse_narx", "write_json", "warn", "note",
-           "show_progress"]
+           "show_progress", "elapsed_ticker"]
 
 EXIT_CODES = """exit codes:
   0    done
@@ -88,6 +88,41 @@ def show_progress(args) -> bool:
     """Progress bars only for a person watching: not with --quiet, not when stderr is a
     file or pipe (a log, CI)."""
     return not getattr(args, "quiet", False) and sys.stderr.isatty()
+
+
+class elapsed_ticker:
+    """``with elapsed_ticker(args, "fitting"):`` a one-line progress display on stderr for a
+    long computation that has no steps to count: the task and the seconds elapsed, redrawn
+    every second and erased at the end. Only where :func:`show_progress` (a terminal, not
+    --quiet); elsewhere it does nothing."""
+
+    def __init__(self, args, what: str, every: float = 1.0):
+        self.on = show_progress(args)
+        self.text = f"cdam {getattr(args, 'command', 'cdam')}: {what}"
+        self.every = every
+
+    def _run(self):
+        import time
+        t0 = time.monotonic()
+        while not self._stop.wait(self.every):
+            sys.stderr.write(f"\r{self.text} ... {time.monotonic() - t0:.0f} s elapsed")
+            sys.stderr.flush()
+
+    def __enter__(self):
+        if self.on:
+            import threading
+            self._stop = threading.Event()
+            self._thread = threading.Thread(target=self._run, daemon=True)
+            self._thread.start()
+        return self
+
+    def __exit__(self, *exc):
+        if self.on:
+            self._stop.set()
+            self._thread.join()
+            sys.stderr.write("\r\033[K")
+            sys.stderr.flush()
+        return False
 
 
 class CliError(Exception):

@@ -15,6 +15,9 @@ import sys
 from pathlib import Path
 
 
+EMPS_UNITS = {"tau": "N", "q": "m"}     # the EMPS axis: force gtau * vir in N, position in m
+
+
 def emps_report(out_dir) -> Path:
     """Write the EMPS example report into ``out_dir``; returns the path of index.md."""
     from cdam_core.record.realdata.emps import load_emps
@@ -25,11 +28,12 @@ def emps_report(out_dir) -> Path:
                   validation=(p["t"], {"tau": p["force"], "q": p["qm"]}), output_error=True)
     out = write_report(sel, out_dir, title="EMPS (DATA_EMPS, free run on DATA_EMPS_PULSES)",
                        source="EMPS benchmark (Janot, Gautier, Brunot 2019): force = gtau * vir, "
-                              "output qm; free-run errors on DATA_EMPS_PULSES")
+                              "output qm; free-run errors on DATA_EMPS_PULSES",
+                       units=EMPS_UNITS)
     _emps_benchmark(sel, p, Path(out_dir))
     selp = analyse("rigid_axis", p["t"], {"tau": p["force"], "q": p["qm"]}, free_run=False)
     write_report(selp, Path(out_dir) / "pulses", title="EMPS DATA_EMPS_PULSES",
-                 source="EMPS benchmark, DATA_EMPS_PULSES (pulses inside vir)")
+                 source="EMPS benchmark, DATA_EMPS_PULSES (pulses inside vir)", units=EMPS_UNITS)
     return out
 
 

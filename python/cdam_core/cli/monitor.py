@@ -2,7 +2,8 @@
 on a training record with --calibrate OUT)."""
 from __future__ import annotations
 
-from cdam_core.cli.common import CliError, add_outputs, check_io, note, write_json
+from cdam_core.cli.common import (CliError, add_outputs, check_io, elapsed_ticker, note,
+                                  write_json)
 
 FLAG_NAMES = {1: "cusum_up", 2: "cusum_down", 4: "ewma"}
 
@@ -58,7 +59,8 @@ def run(args) -> int:
     dt = float(np.median(np.diff(st.t)))
     if args.calibrate:
         note(args, f"calibrating the monitor on {args.record} ({len(st.t)} rows)")
-        sec = calibrate(mf.model, U, Y, dt, st.lengths, paths=args.paths, seed=args.seed)
+        with elapsed_ticker(args, "simulating the residual's false-alarm thresholds"):
+            sec = calibrate(mf.model, U, Y, dt, st.lengths, paths=args.paths, seed=args.seed)
         save_model(args.calibrate, mf.model, inputs=mf.inputs, outputs=mf.outputs,
                    smoothing_passes=mf.smoothing_passes, meta=mf.meta, monitor=sec)
         js = {"model": str(args.model), "record": str(args.record), "output": args.calibrate,

@@ -7,7 +7,7 @@ import math
 from pathlib import Path
 
 from cdam_core.base.jsonio import write_text_atomic
-from cdam_core.cli.common import CliError, add_outputs, check_io, note
+from cdam_core.cli.common import CliError, add_outputs, check_io, elapsed_ticker
 
 
 def _split(s):
@@ -78,12 +78,11 @@ def run(args) -> int:
     # when the held-out data do not support them
     terms = list((meta.get("model") or {}).get("terms") or []) \
         if isinstance(meta.get("model"), dict) else []
-    if sys.stderr.isatty():
-        note(args, f"fitting {args.model} and testing {len(LIBRARY)} library effects on "
-                   f"{len(ds)} samples (about a minute for long records)")
-    sel = analyse(args.model, ds.t, signals, extra=extra or None, cutoff_hz=args.cutoff,
-                  alpha=args.alpha, free_run=not args.no_free_run, fixed=fixed or None,
-                  declared=declared, keep_terms=terms, output_error=args.output_error)
+    with elapsed_ticker(args, f"fitting {args.model} and testing {len(LIBRARY)} library "
+                              f"effects on {len(ds)} samples"):
+        sel = analyse(args.model, ds.t, signals, extra=extra or None, cutoff_hz=args.cutoff,
+                      alpha=args.alpha, free_run=not args.no_free_run, fixed=fixed or None,
+                      declared=declared, keep_terms=terms, output_error=args.output_error)
     js = to_json(sel)
     js["source"] = str(args.data)
     js["declared_effects"] = declared
@@ -94,7 +93,9 @@ def run(args) -> int:
     if args.json:
         write_text_atomic(args.json, json.dumps(js, indent=2))
     if args.report:
-        write_report(sel, args.report, title=Path(args.data).name, source=str(args.data))
+        units = {name: u for name, col in mapping.items() if (u := ds.units.get(col))}
+        write_report(sel, args.report, title=Path(args.data).name, source=str(args.data),
+                     units=units)
     if not args.json:
         print(json.dumps(js, indent=2))
     else:

@@ -87,7 +87,8 @@ def install_hint(missing) -> str:
         pkgs.append(p)
         if p == APT[ARM_GCC]:   # the compiler's C and C++ libraries come in packages of their own
             pkgs += [APT["newlib"], APT["c++ headers"]]
-    return "install with: apt-get install " + " ".join(dict.fromkeys(pkgs)) + " (Debian/Ubuntu)"
+    return ("install with: bash scripts/setup.sh --firmware (from a checkout), or apt-get "
+            "install " + " ".join(dict.fromkeys(pkgs)) + " (Debian/Ubuntu)")
 
 
 def toolchain_available() -> str | None:

@@ -6,7 +6,9 @@ from pathlib import Path
 
 import numpy as np
 
-from cdam_core.base.jsonio import atomic_target, write_text_atomic
+from cdam_core.base.jsonio import atomic_target
+from cdam_core.record.dataset import STANDARD_UNITS
+from cdam_core.report.page import write_page
 
 __all__ = ["horizon_table", "group_table", "write_horizon_report"]
 
@@ -48,10 +50,11 @@ def group_table(scores, at=(1, 10, 25, 50)) -> str:
 
 def write_horizon_report(scores, folder, title: str, dt: float | None = None,
                          units: dict | None = None) -> Path:
-    """``index.md`` and ``rmse_vs_horizon.png`` (one panel per output) in ``folder``."""
+    """``index.md``, ``index.html`` and ``rmse_vs_horizon.png`` (one panel per output) in
+    ``folder``."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    units = units or {}
+    units = {**STANDARD_UNITS, **(units or {})}      # the dataset format's, else given
     x = np.asarray(scores.horizons, dtype=float) * (dt if dt else 1.0)
     _panels(folder / "rmse_vs_horizon.png", x, dt, scores.rmse,
             [f"RMSE {o} [{units.get(o, 'output units')}]" for o in scores.outputs])
@@ -67,8 +70,7 @@ def write_horizon_report(scores, folder, title: str, dt: float | None = None,
                "*Figure: mean error per group against the prediction horizon (Euclidean norm of "
                "the group's error vector; attitude as the quaternion geodesic angle), for every "
                "predictor of the comparison, on the same rows.*", ""]
-    write_text_atomic(folder / "index.md", "\n".join(md))
-    return folder / "index.md"
+    return write_page(folder / "index.md", md, title)
 
 
 def _unit(group) -> str:

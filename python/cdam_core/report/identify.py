@@ -1,10 +1,12 @@
-"""The identification report: Markdown with PNG figures (matplotlib, Agg backend).
+"""The identification report: Markdown and HTML with PNG figures (matplotlib, Agg backend),
+units on every axis (the dataset format's SI units, or ``units``), a caption under each figure.
 
 Tables 2/3-style per output and algorithm (mean and std of Pearson r, RMSE and NRMSE over seeds,
 per evaluation record and mode), final fitness (adaptation value 1 / (1 + MSE)) and run times,
 the rank-sum verdicts, convergence curves (the paper's Fig. 11: adaptation value of the best
 individual per iteration, mean over seeds with a min-max band) and predicted against measured
-time series of the best-fitness model of each algorithm (Figs. 12-15).
+time series of the best-fitness model of each algorithm (Figs. 12-15) and their residuals
+(measured minus predicted) against time.
 """
 from __future__ import annotations
 
@@ -13,8 +15,10 @@ from pathlib import Path
 import numpy as np
 
 from cdam_core.base.metrics import adaptation_value
-from cdam_core.base.jsonio import atomic_target, write_text_atomic
+from cdam_core.base.jsonio import atomic_target
 from cdam_core.preprocess import smooth_pair
+from cdam_core.record.dataset import STANDARD_UNITS
+from cdam_core.report.page import figure, write_page
 
 __all__ = ["write_report", "headline"]
 
@@ -87,8 +91,8 @@ def _convergence_figure(result, path):
         it = np.arange(fit.shape[1])
         ax.plot(it, fit.mean(axis=0), label=_LABEL[algo])
         ax.fill_between(it, fit.min(axis=0), fit.max(axis=0), alpha=0.2)
-    ax.set_xlabel("iteration")
-    ax.set_ylabel("adaptation value 1 / (1 + MSE)")
+    ax.set_xlabel("iteration [-]")
+    ax.set_ylabel("adaptation value 1 / (1 + MSE) [-]")
     ax.set_title("Convergence of the initial-weight search (mean, min-max over seeds)")
     ax.grid(True, alpha=0.3)
     ax.legend()
@@ -98,31 +102,58 @@ def _convergence_figure(result, path):
     plt.close(fig)
 
 
-def _prediction_figure(models, record, names, passes, t, path, title):
-    import matplotlib.pyplot as plt
+def _label(name: str, units: dict) -> str:
+    return f"{name} [{units.get(name) or 'output units'}]"
+
+
+def _predictions(models, record, passes):
+    """The smoothed measured outputs and each algorithm's prediction (free run for a dynamic
+    model, the static map otherwise)."""
     U, Y = smooth_pair(record[0], record[1], passes)
-    m = Y.shape[1]
+    return Y, {algo: (model.predict(U, Y, mode="free_run") if model.narx is not None
+                      else model.predict(U)) for algo, model in models.items()}
+
+
+def _series_figure(x, series: dict, names, units, path, title, xlabel, ylabel_prefix=""):
+    """One panel per output, one line per entry of ``series`` ({label: (N, m) array})."""
+    import matplotlib.pyplot as plt
+    m = len(names)
     fig, axes = plt.subplots(m, 1, figsize=(8, 1.8 * m + 0.6), sharex=True, squeeze=False)
-    x = t if t is not None and len(t) == len(Y) else np.arange(len(Y))
-    for k in range(m):
-        axes[k, 0].plot(x, Y[:, k], "k", lw=1.2, label="measured")
-    for algo, model in models.items():
-        if model.narx is not None:
-            P = model.predict(U, Y, mode="free_run")
-        else:
-            P = model.predict(U)
+    for i, (label, A) in enumerate(series.items()):
         for k in range(m):
-            axes[k, 0].plot(x, P[:, k], lw=0.9, label=_LABEL[algo])
+            style = dict(color="k", lw=1.2) if label == "measured" else dict(lw=0.9)
+            axes[k, 0].plot(x, A[:, k], label=label, **style)
     for k in range(m):
-        axes[k, 0].set_ylabel(names[k])
+        axes[k, 0].set_ylabel(ylabel_prefix + _label(names[k], units), fontsize=8)
         axes[k, 0].grid(True, alpha=0.3)
-    axes[0, 0].legend(loc="upper right", fontsize=7, ncol=len(models) + 1)
-    axes[-1, 0].set_xlabel("t (s)" if t is not None else "sample")
+    axes[0, 0].legend(loc="upper right", fontsize=7, ncol=len(series))
+    axes[-1, 0].set_xlabel(xlabel)
     fig.suptitle(title)
     fig.tight_layout()
     with atomic_target(path) as tmp:
         fig.savefig(tmp, dpi=110)
     plt.close(fig)
+
+
+def _prediction_figures(models, record, names, passes, t, units, d, rec) -> list[str]:
+    """Predicted against measured, and the residuals, of record ``rec``: the Markdown lines."""
+    Y, P = _predictions(models, record, passes)
+    x = t if t is not None and len(t) == len(Y) else np.arange(len(Y))
+    xlabel = "time [s]" if x is t else "sample [-]"
+    mode = "free run" if any(m.narx is not None for m in models.values()) else "static map"
+    pred = {"measured": Y, **{_LABEL[a]: p for a, p in P.items()}}
+    res = {_LABEL[a]: Y - p for a, p in P.items()}
+    f1, f2 = f"predicted_{rec}.png", f"residual_{rec}.png"
+    _series_figure(x, pred, names, units, d / f1,
+                   f"{rec}: measured and predicted (best seed per algorithm)", xlabel)
+    _series_figure(x, res, names, units, d / f2,
+                   f"{rec}: residual, measured minus predicted", xlabel, "residual ")
+    return (figure(f1, f"{rec} predicted", f"Predicted ({mode}, best seed of each algorithm) "
+                   f"against measured outputs of the {rec} record, one panel per output, "
+                   "after the same smoothing as in training.")
+            + figure(f2, f"{rec} residual", f"Residual (measured minus predicted, {mode}) of "
+                     f"the {rec} record, one panel per output: a model that captured the "
+                     "dynamics leaves a small residual without trend or periodic pattern."))
 
 
 def _times_figure(result, path):
@@ -132,7 +163,8 @@ def _times_figure(result, path):
     fig, ax = plt.subplots(figsize=(5, 3))
     ax.bar([_LABEL[a] for a in algos], [s[a]["seconds"]["mean"] for a in algos],
            yerr=[s[a]["seconds"]["std"] for a in algos], capsize=4)
-    ax.set_ylabel("run time per seed (s)")
+    ax.set_ylabel("run time per seed [s]")
+    ax.set_xlabel("algorithm")
     fig.tight_layout()
     with atomic_target(path) as tmp:
         fig.savefig(tmp, dpi=110)
@@ -140,13 +172,17 @@ def _times_figure(result, path):
 
 
 def write_report(comparison, directory, *, records: dict | None = None,
-                 times: dict | None = None, title: str = "System identification report") -> Path:
-    """Write ``report.md`` and its PNG figures into ``directory``; returns the Markdown path.
+                 times: dict | None = None, title: str = "System identification report",
+                 units: dict | None = None) -> Path:
+    """Write ``report.md``, ``report.html`` and the PNG figures into ``directory``; returns the
+    Markdown path.
 
     ``comparison``: a :class:`cdam_core.evaluate.Comparison`. ``records`` ({name: (U, Y)})
-    draws predicted-against-measured figures with the best model of each algorithm
-    (``comparison.models``); ``times`` ({name: t}) gives their time axes.
+    draws predicted-against-measured and residual figures with the best model of each
+    algorithm (``comparison.models``); ``times`` ({name: t}) gives their time axes; ``units``
+    ({output: unit}) the outputs' units (default: the dataset format's SI units).
     """
+    units = {**STANDARD_UNITS, **(units or {})}
     result = comparison.result
     import matplotlib
     matplotlib.use("Agg")
@@ -180,7 +216,8 @@ def write_report(comparison, directory, *, records: dict | None = None,
                           "| output | " + " | ".join(_LABEL[a] for a in algos) + " |",
                           "|---" * (len(algos) + 1) + "|"]
                 for out in names:
-                    lines.append(f"| {out} | " + " | ".join(
+                    label = _label(out, units) if metric == "rmse" else f"{out} [-]"
+                    lines.append(f"| {label} | " + " | ".join(
                         _fmt(summary[a]["records"][rec][mode][out][metric]) for a in algos) + " |")
     if result.get("rank_sum"):
         lines += ["", "## Does IBOA beat the others? (one-sided Mann-Whitney rank-sum, p < 0.05)",
@@ -192,17 +229,18 @@ def write_report(comparison, directory, *, records: dict | None = None,
     lines += ["", "## Figures", ""]
     if any(r["curve_mse"] for a in result["algorithms"].values() for r in a["runs"]):
         _convergence_figure(result, d / "convergence.png")
-        lines += ["![convergence](convergence.png)", ""]
+        lines += figure("convergence.png", "convergence",
+                        "Convergence of the initial-weight search: adaptation value of the "
+                        "best individual per iteration, mean over seeds with the min-max band "
+                        "(the paper's Fig. 11).")
     _times_figure(result, d / "run_times.png")
-    lines += ["![run times](run_times.png)", ""]
+    lines += figure("run_times.png", "run times",
+                    "Run time per seed of each algorithm (mean, error bar one standard "
+                    "deviation over seeds), optimiser and Levenberg-Marquardt together.")
     models = comparison.models
     for rec, data in (records or {}).items():
         if not models:
             break
-        fname = f"predicted_{rec}.png"
-        _prediction_figure(models, data, names, cfg["smoothing_passes"], (times or {}).get(rec),
-                           d / fname, f"{rec}: measured and predicted (best seed per algorithm)")
-        lines += [f"![{rec}]({fname})", ""]
-    md = d / "report.md"
-    write_text_atomic(md, "\n".join(lines) + "\n")
-    return md
+        lines += _prediction_figures(models, data, names, cfg["smoothing_passes"],
+                                     (times or {}).get(rec), units, d, rec)
+    return write_page(d / "report.md", lines, title)

@@ -1,14 +1,16 @@
-"""The residual analysis as JSON and as a Markdown report with PNG figures (matplotlib, Agg)."""
+"""The residual analysis as JSON and as a report (Markdown and HTML) with PNG figures
+(matplotlib, Agg): units on every axis and in the parameter tables (``report.units``), a caption
+under every figure, the residual spectrum one panel per channel."""
 from __future__ import annotations
 
 import json
-import math
-import os
 from pathlib import Path
 
 import numpy as np
 
 from cdam_core.base.jsonio import atomic_target, plain, write_text_atomic
+from cdam_core.report.page import figure, write_page
+from cdam_core.report.units import channel_unit, parameter_unit
 
 from cdam_core.residual import diagnostics as dg
 from cdam_core.residual.selection import Selection
@@ -77,7 +79,11 @@ def _fmt_err(err: dict) -> str:
                      for k, v in err.items())
 
 
-def _figure_finding(path: Path, sel: Selection, i: int) -> None:
+def _bracket(unit: str) -> str:
+    return f"[{unit}]" if unit else "[equation units]"
+
+
+def _figure_finding(path: Path, sel: Selection, i: int, units: dict) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -92,53 +98,90 @@ def _figure_finding(path: Path, sel: Selection, i: int) -> None:
     fig, ax = plt.subplots(2, 2, figsize=(11, 7))
     ax[0, 0].plot(t, r0, lw=0.6, label="before")
     ax[0, 0].plot(t, r1, lw=0.6, label="after")
-    ax[0, 0].set(title=f"residual ({ch})", xlabel="t [s]")
+    ru = _bracket(channel_unit(model.name, ch, units))
+    ax[0, 0].set(title=f"residual ({ch})", xlabel="t [s]", ylabel=f"residual {ru}")
     ax[0, 0].legend()
     for r, lab in ((r0, "before"), (r1, "after")):
         ac = dg.autocorrelation(r, 25)
         ax[0, 1].plot(ac["lags"], ac["acf"], "o-", ms=3, label=lab)
     ax[0, 1].axhspan(-ac["band"], ac["band"], color="grey", alpha=0.3, label="99 % band")
-    ax[0, 1].set(title="residual autocorrelation", xlabel="lag [samples]")
+    ax[0, 1].set(title="residual autocorrelation", xlabel="lag [samples]",
+                 ylabel="autocorrelation [-]")
     ax[0, 1].legend()
     for r, lab in ((r0, "before"), (r1, "after")):
         cc = dg.cross_correlation(r, u, 25)
         ax[1, 0].plot(cc["lags"], cc["ccf"], "o-", ms=3, label=lab)
     ax[1, 0].axhspan(-cc["band"], cc["band"], color="grey", alpha=0.3)
-    ax[1, 0].set(title=f"residual / input ({model.inputs[0]}) cross-correlation", xlabel="lag")
+    ax[1, 0].set(title=f"residual / input ({model.inputs[0]}) cross-correlation",
+                 xlabel="lag [samples]", ylabel="cross-correlation [-]")
     ax[1, 0].legend()
     step = max(1, r0.size // 4000)
     ax[1, 1].plot(reg[::step], r0[::step], ".", ms=2)
-    ax[1, 1].set(title=f"{eff.key} regressor against residual before", xlabel="regressor",
-                 ylabel="residual")
+    ax[1, 1].set(title=f"{eff.key} regressor against residual before",
+                 xlabel="regressor [per unit of the parameter]", ylabel=f"residual {ru}")
     fig.tight_layout()
     with atomic_target(path) as tmp:
         fig.savefig(tmp, dpi=90)
     plt.close(fig)
 
 
-def _figure_spectrum(path: Path, sel: Selection) -> None:
+def _figure_spectrum(path: Path, sel: Selection, units: dict) -> None:
+    """The residual's Welch spectrum, one panel per channel (declared and final model), the
+    unexplained lines marked on their channel's panel."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     fs = 1.0 / sel.declared.signals["dt"]
-    fig, ax = plt.subplots(figsize=(8, 4))
-    for lab, f_ in (("declared", sel.declared), ("final", sel.final)):
-        for ch, r in f_.residuals.items():
-            f, p = dg.spectrum(r, fs, 0.25)
-            ax.semilogy(f, p, label=f"{lab} {ch}")
-    for u in sel.unexplained:
-        ax.axvline(u["frequency_hz"], color="r", ls="--", lw=0.8)
-    ax.set(xlabel="frequency [Hz]", ylabel="PSD", title="residual spectrum (Welch)")
-    ax.legend()
+    chans = list(dict.fromkeys(list(sel.declared.residuals) + list(sel.final.residuals)))
+    fig, axes = plt.subplots(len(chans), 1, figsize=(8, 2.6 * len(chans) + 0.4), squeeze=False,
+                             sharex=True)
+    for ax, ch in zip(axes[:, 0], chans):
+        for lab, f_ in (("declared", sel.declared), ("final", sel.final)):
+            if ch in f_.residuals:
+                f, p = dg.spectrum(f_.residuals[ch], fs, 0.25)
+                ax.semilogy(f, p, lw=0.8, label=f"{lab} model")
+        for u in sel.unexplained:
+            if u["channel"] == ch:
+                ax.axvline(u["frequency_hz"], color="r", ls="--", lw=0.8)
+        unit = channel_unit(sel.model.name, ch, units)
+        ax.set(ylabel=f"PSD [{unit}²/Hz]" if unit else "PSD [(equation units)²/Hz]",
+               title=f"residual spectrum (Welch), channel {ch}")
+        ax.grid(True, alpha=0.3, which="both")
+        ax.legend(loc="upper right", fontsize=8)
+    axes[-1, 0].set_xlabel("frequency [Hz]")
     fig.tight_layout()
     with atomic_target(path) as tmp:
         fig.savefig(tmp, dpi=90)
     plt.close(fig)
 
 
-def write_report(sel: Selection, out_dir, title: str | None = None, source: str = "") -> Path:
-    """Write ``index.md``, ``residual.json`` and the PNG figures into ``out_dir``."""
+def _param_rows(sel, fit, units: dict) -> list[str]:
+    """Table rows: parameter, value, standard deviation, relative sigma, unit."""
+    rows = []
+    for k, v in fit.theta.items():
+        sd = fit.std.get(k)
+        unit = parameter_unit(sel.model.name, k, units)
+        if k not in fit.estimated:
+            rows.append(f"| {k} | {v:.6g} | fixed | | {unit} |")
+        elif sd is None or not np.isfinite(sd):
+            rows.append(f"| {k} | {v:.6g} | n/a (at a bound or not identifiable) | | {unit} |")
+        else:
+            rel = f"{100 * sd / abs(v):.3g}" if v != 0 else ""
+            rows.append(f"| {k} | {v:.6g} | {sd:.3g} | {rel} | {unit} |")
+    return rows
+
+
+_PARAM_HEAD = ["| parameter | value | standard deviation | relative sigma [%] | unit |",
+               "|---|---|---|---|---|"]
+
+
+def write_report(sel: Selection, out_dir, title: str | None = None, source: str = "",
+                 units: dict | None = None) -> Path:
+    """Write ``index.md``, ``index.html``, ``residual.json`` and the PNG figures into
+    ``out_dir``. ``units``: the record's unit per model signal (``{"tau": "N", "q": "m"}``),
+    for the axes and the parameter tables (blank where not given)."""
+    units = dict(units or {})
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise ValueError(f"out_dir: {out} exists and is not a folder")
@@ -150,44 +193,44 @@ def write_report(sel: Selection, out_dir, title: str | None = None, source: str 
         lines += [f"Data: {source}", ""]
     lines += [f"Declared model `{sel.model.name}`; derivatives: "
               f"{js['settings'].get('derivative_filter')}.", "",
-              "## Declared model", "", "| parameter | value |", "|---|---|"]
-    lines += [f"| {k} | {v:.6g} |" for k, v in sel.declared.theta.items()]
+              "## Declared model", ""] + _PARAM_HEAD + _param_rows(sel, sel.declared, units)
     lines += ["", "| channel | RMSE | NRMSE |", "|---|---|---|"]
-    lines += [f"| {k} | {v['rmse']:.4g} | {100 * v['nrmse']:.2f} % |"
-              for k, v in sel.declared_error.items()]
+    lines += [f"| {k} | {v['rmse']:.4g} {channel_unit(sel.model.name, k, units)} | "
+              f"{100 * v['nrmse']:.2f} % |" for k, v in sel.declared_error.items()]
     lines += ["", "## Findings", ""]
     if not sel.steps:
         lines += ["No candidate effect is significant.", ""]
     for i, (st, fjs) in enumerate(zip(sel.steps, js["findings"])):
         png = f"finding_{i + 1}_{fjs['effect']}.png"
-        _figure_finding(out / png, sel, i)
+        _figure_finding(out / png, sel, i, units)
         ev = fjs["evidence"]
         lines += [f"### {i + 1}. `{fjs['effect']}` on `{fjs['channel']}`", "",
-                  "Parameters: " + ", ".join(f"{k} = {v:.6g}" if isinstance(v, float) else
-                                             f"{k} = {v}" for k, v in fjs["parameters"].items()),
+                  "Parameters: " + ", ".join(
+                      f"{k} = {v:.6g}" + (f" {u}" if (u := parameter_unit(
+                          sel.model.name, f"{st.candidate.effect.key}.{k}", units)) else "")
+                      if isinstance(v, float) else f"{k} = {v}"
+                      for k, v in fjs["parameters"].items()),
                   "", "| channel | before RMSE | before NRMSE | after RMSE | after NRMSE |",
                   "|---|---|---|---|---|"]
         for k, b in fjs["error_before"].items():
             a = fjs["error_after"][k]
-            lines.append(f"| {k} | {b['rmse']:.4g} | {100 * b['nrmse']:.2f} % | {a['rmse']:.4g} "
-                         f"| {100 * a['nrmse']:.2f} % |")
+            u = channel_unit(sel.model.name, k, units)
+            lines.append(f"| {k} | {b['rmse']:.4g} {u} | {100 * b['nrmse']:.2f} % | "
+                         f"{a['rmse']:.4g} {u} | {100 * a['nrmse']:.2f} % |")
         lines += ["", f"Evidence: ERR {ev['err']:.3g}, F = {ev['f_statistic']:.4g} on "
                   f"({ev['added_parameters']}, N_eff = {ev['n_eff']:.0f}) -> p = {ev['p_value']:.3g}, "
                   f"delta BIC {ev['delta_bic']:.4g}; Ljung-Box p before "
                   f"{ev['ljung_box_before']['pvalue']:.3g}, after {ev['ljung_box_after']['pvalue']:.3g}.",
-                  "", f"![finding {i + 1}]({png})", ""]
+                  ""] + figure(png, f"finding {i + 1}",
+                               f"Figure {i + 1}: residual of the {st.candidate.effect.display_equation(st.before.residuals)} "
+                               f"equation before and after adding `{fjs['effect']}` against "
+                               "time (top left), its autocorrelation with the 99 % band of a "
+                               "white residual (top right), its cross-correlation with the "
+                               f"input `{sel.model.inputs[0]}` (bottom left), and the effect's "
+                               "regressor against the residual before (bottom right).")
     lines += ["## After", "", f"Residual white (Ljung-Box, 25 lags, 1 %): "
               f"{'yes' if sel.white_after else 'no'}.", ""]
-    lines += ["| parameter | value | standard deviation | relative sigma [%] |", "|---|---|---|---|"]
-    for k, v in sel.final.theta.items():
-        sd = sel.final.std.get(k)
-        if k not in sel.final.estimated:
-            lines.append(f"| {k} | {v:.6g} | fixed | |")
-        elif sd is None or not np.isfinite(sd):
-            lines.append(f"| {k} | {v:.6g} | n/a (at a bound or not identifiable) | |")
-        else:
-            rel = f"{100 * sd / abs(v):.3g}" if v != 0 else ""
-            lines.append(f"| {k} | {v:.6g} | {sd:.3g} | {rel} |")
+    lines += _PARAM_HEAD + _param_rows(sel, sel.final, units)
     lines += ["", "Standard deviations are the least-squares ones (residuals taken as white: "
               "optimistic when they are not)."]
     dropped = sel.settings.get("declared_terms_dropped") or []
@@ -216,7 +259,9 @@ def write_report(sel: Selection, out_dir, title: str | None = None, source: str 
     else:
         lines += ["None found (no spectral peak of 1 decade or more, no periodic line outside "
                   "the inputs' own lines)."]
-    _figure_spectrum(out / "spectrum.png", sel)
-    lines += ["", "![spectrum](spectrum.png)", ""]
-    write_text_atomic(out / "index.md", "\n".join(lines))
-    return out / "index.md"
+    _figure_spectrum(out / "spectrum.png", sel, units)
+    lines += [""] + figure("spectrum.png", "spectrum",
+                           f"Figure {len(sel.steps) + 1}: power spectral density (Welch) of the "
+                           "residual of the declared and the final model, one panel per channel; "
+                           "dashed red lines: structure no library effect explains (table above).")
+    return write_page(out / "index.md", lines, f"Residual analysis: {title or sel.model.name}")

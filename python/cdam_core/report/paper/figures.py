@@ -16,6 +16,7 @@ import numpy as np
 
 from cdam_core.base.metrics import adaptation_value
 from cdam_core.base.jsonio import atomic_target
+from cdam_core.record.dataset import STANDARD_UNITS
 from cdam_core.report.paper.published import LABEL
 
 __all__ = ["preprocessing_figure", "convergence_figure", "identified_figure"]
@@ -23,6 +24,11 @@ __all__ = ["preprocessing_figure", "convergence_figure", "identified_figure"]
 QUADROTOR = ("phi", "theta", "psi", "X", "Y", "Z")
 MANIPULATOR = ("q1", "q2")
 _DPI = 90
+
+
+def _label(name: str) -> str:
+    """An axis label with the channel's unit (the dataset format's SI units)."""
+    return f"{name} [{STANDARD_UNITS.get(name, '-')}]"
 
 
 def _finish(fig, path, top_inches=0.45, bottom_inches=0.5):
@@ -52,10 +58,10 @@ def preprocessing_figure(t, raw, smooth, names, path: Path, title: str) -> None:
         ax = axes[k, 0]
         ax.plot(t, raw[:, k], color="0.65", lw=0.6, label="raw")
         ax.plot(t, smooth[:, k], color="C0", lw=0.9, label="smoothed")
-        ax.set_ylabel(name)
+        ax.set_ylabel(_label(name))
         ax.grid(True, alpha=0.3)
     axes[0, 0].legend(loc="upper right", fontsize=7, ncol=2)
-    axes[-1, 0].set_xlabel("t (s)")
+    axes[-1, 0].set_xlabel("time [s]")
     fig.suptitle(title, fontsize=10)
     _finish(fig, path)
 
@@ -73,8 +79,8 @@ def convergence_figure(sections: dict, path: Path) -> None:
             it = np.arange(fit.shape[1])
             ax.plot(it, fit.mean(axis=0), label=LABEL[algo])
             ax.fill_between(it, fit.min(axis=0), fit.max(axis=0), alpha=0.2)
-        ax.set_xlabel("iteration")
-        ax.set_ylabel("adaptation value 1 / (1 + MSE)")
+        ax.set_xlabel("iteration [-]")
+        ax.set_ylabel("adaptation value 1 / (1 + MSE) [-]")
         ax.set_title(f"{label}: best individual per iteration", fontsize=10)
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=8)
@@ -99,9 +105,9 @@ def identified_figure(measured, predicted: dict, outputs, names, rate, seams, pa
             ax.plot(x, P[:, k], lw=0.9, label=LABEL[algo])
         for s in seams:
             ax.axvline(s / rate, color="0.4", ls="--", lw=0.8)
-        ax.set_ylabel(outputs[k])
+        ax.set_ylabel(_label(outputs[k]))
         ax.grid(True, alpha=0.3)
     axes[0, 0].legend(loc="upper right", fontsize=7, ncol=len(predicted) + 1)
-    axes[-1, 0].set_xlabel("time in the pooled record (s); dashed: seam (i) | (ii)")
+    axes[-1, 0].set_xlabel("time in the pooled record [s]; dashed: seam (i) | (ii)")
     fig.suptitle(title, fontsize=10)
     _finish(fig, path)

@@ -3,11 +3,13 @@ so every number on the page is a number in results.json, rounded)."""
 from __future__ import annotations
 
 import math
+import re
 
+from cdam_core.report.page import figure
 from cdam_core.report.paper.published import LABEL, OUTPUTS, TABLE2, TABLE3
 from cdam_core.report.paper.tables import markdown_tables, mode_label
 
-__all__ = ["index_lines"]
+__all__ = ["index_lines", "figure_caption"]
 
 
 def _setup(result) -> list[str]:
@@ -174,8 +176,42 @@ def _figures(result) -> list[str]:
     f = result["files"]
     lines = ["## Figures (the paper's Figs. 8-15)", ""]
     for name in f["preprocessing"] + f["convergence"] + f["identified"]:
-        lines += [f"![{name}]({name})", ""]
+        lines += figure(name, name, figure_caption(name, result))
     return lines
+
+
+_CAPTION_SECTION = {"narx": "NARX network", "hybrid": "hybrid ARX + network"}
+_PRE = {8: "the quadrotor's outputs in experiment (i): attitude phi, theta, psi [rad] and "
+           "position X, Y, Z [m]",
+        9: "the quadrotor's inputs in experiment (i): thrust T [N] and body torques tau_phi, "
+           "tau_theta, tau_psi [N m]",
+        10: "the manipulator in experiment (ii): joint torques tau_m1, tau_m2 [N m] and joint "
+            "angles q1, q2 [rad]"}
+
+
+def figure_caption(name: str, result: dict) -> str:
+    """The caption under figure file ``name`` (``fig08_...``, ``fig11_...``, ``fig12_...``)."""
+    m = re.match(r"fig(\d+)_(?:(test|validation)_(quadrotor|manipulator)(?:_(\w+?)_"
+                 r"(one_step|free_run))?)?", name)
+    n = int(m.group(1)) if m else 0
+    passes = result.get("config", {}).get("smoothing_passes")
+    if n in _PRE:
+        return (f"Figure {n}: {_PRE[n]}, raw (grey) and after {passes} passes of five-point "
+                "cubic smoothing (colour), against time.")
+    if n == 11:
+        return ("Figure 11: convergence of the initial-weight search, one panel per section: "
+                "adaptation value 1 / (1 + MSE) of the best individual per iteration, mean over "
+                "seeds with the min-max band.")
+    if m and m.group(2):
+        rec, part = m.group(2), m.group(3)
+        how = ("the static network (one step)" if not m.group(4) else
+               f"the {_CAPTION_SECTION.get(m.group(4), m.group(4))} model in "
+               f"{m.group(5).replace('_', '-')}")
+        return (f"Figure {n}: {part} outputs identified by {how} against the actual ones "
+                f"(black) on the {rec} record, the best-fitness seed of each algorithm; the "
+                "dashed line marks the seam between experiments (i) and (ii). Units: angles "
+                "[rad], positions [m].")
+    return f"Figure: {name}."
 
 
 def index_lines(result: dict) -> list[str]:
