@@ -243,6 +243,14 @@ def write_report(sel: Selection, out_dir, title: str | None = None, source: str 
                          f"{v['score_simple']:.3g}, one-sided Wilcoxon p {v['p_value']:.2g} at "
                          f"level {v['level']:.2g}" for name, v in est["validation"].items())
         lines += ["", f"Estimator: {est['chosen']} (alternatives on held-out windows: {alts})."]
+    stab = sel.settings.get("stability") or {}
+    if "stable" in stab:
+        lines += ["", "Linearised at rest (effects left out): " + (
+            "stable" if stab["stable"] else "**unstable**: the model falls over or diverges "
+            "in a free run") + f" (largest real part of the eigenvalues {stab['max_real_part']:.3g}"
+            " 1/s)."]
+    elif stab:
+        lines += ["", f"Stability not computed: {stab.get('reason')}."]
     idf = sel.settings.get("identifiability")
     if idf and not idf.get("identifiable", True):
         lines += ["", f"Not identifiable as {idf.get('declared')}: {idf.get('fallback')}."]

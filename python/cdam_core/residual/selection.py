@@ -449,7 +449,13 @@ def select(model, sig: dict, candidates, alpha: float = 0.01, max_steps: int | N
                        for fu in input_lines)
             (at_inputs if near else unexplained).append(
                 {"kind": "periodic_line", "channel": eq, **ln})
+    # [greybox] item 4: the final model linearised at rest (a model that falls over is said)
+    try:
+        stability = greybox_of(current, float(sig["dt"])).stability()
+    except ValueError as exc:
+        stability = {"status": "unavailable", "reason": str(exc)}
     settings = {"declared_effects": sorted(dkeys), "removed_in_backward_pass": removed,
+                "stability": stability,
                 "validation": cv_info, "declared_terms_dropped": dropped_terms,
                 "estimator": estimator,
                 "residual_lines_at_input_frequencies": at_inputs,

@@ -235,20 +235,41 @@ class GreyBox(Model):
         e = self._errors(self._state(x, v, zero, u, ex, k, t), pre, effects)
         return (self._inertia @ e).T
 
-    def _choose_substeps(self) -> int:
-        """h |lambda|max <= 0.5 for the base model linearised at the zero state."""
+    def linearised_eigenvalues(self) -> np.ndarray:
+        """Eigenvalues (1/s) of the declared model (effects left out) linearised at the zero
+        state with zero input: the state matrix [[0, I], [da/dx, da/dv]] by central differences.
+        A rigid axis has one at 0 per position (an integrator); a stable joint's others have
+        negative real parts; a positive real part is a model that falls over (a gravity term
+        of the wrong sign, a negative stiffness or damping)."""
+        if getattr(self, "_m", None) is None:
+            self._check_fitted()
         n = len(self._m.positions)
-        z, u, ex = self._zero_state(2 * n + 1)
+        z, u, ex = self._zero_state(4 * n)
         x, v = z.copy(), z.copy()
         h = 1e-6
         for j in range(2 * n):
-            (x if j < n else v)[j + 1, j % n] += h
-        acc = self._accel(x, v, u, ex, np.zeros(2 * n + 1, dtype=int), np.zeros(2 * n + 1),
-                          self._zero_pre(2 * n + 1), effects=())
+            (x if j < n else v)[2 * j, j % n] += h
+            (x if j < n else v)[2 * j + 1, j % n] -= h
+        acc = self._accel(x, v, u, ex, np.zeros(4 * n, dtype=int), np.zeros(4 * n),
+                          self._zero_pre(4 * n), effects=())
         J = np.zeros((2 * n, 2 * n))
         J[:n, n:] = np.eye(n)
-        J[n:, :] = ((acc[1:] - acc[0]) / h).T
-        lam = float(np.max(np.abs(np.linalg.eigvals(J))))
+        J[n:, :] = ((acc[0::2] - acc[1::2]) / (2 * h)).T
+        return np.linalg.eigvals(J)
+
+    def stability(self) -> dict:
+        """``{"stable", "eigenvalues", "max_real_part"}`` of :meth:`linearised_eigenvalues`;
+        stable when no real part exceeds the differences' accuracy (1e-6 of the largest
+        eigenvalue's magnitude): integrators (0) count as stable."""
+        lam = self.linearised_eigenvalues()
+        top = float(np.max(np.abs(lam))) if lam.size else 0.0
+        worst = float(np.max(lam.real)) if lam.size else 0.0
+        return {"stable": bool(worst <= 1e-6 * max(top, 1.0)), "max_real_part": worst,
+                "eigenvalues": [[float(c.real), float(c.imag)] for c in lam]}
+
+    def _choose_substeps(self) -> int:
+        """h |lambda|max <= 0.5 for the base model linearised at the zero state."""
+        lam = float(np.max(np.abs(self.linearised_eigenvalues())))
         steps = max(1, int(np.ceil(float(self.dt) * lam / 0.5)))
         if steps > MAX_SUBSTEPS:
             raise ValueError(f"theta: the model's fastest mode ({lam:.3g} 1/s) needs {steps} "
