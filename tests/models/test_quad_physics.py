@@ -77,12 +77,12 @@ def test_k_step_error_at_the_noise_level():
 
 def _hand_model(trans=(0.0, 0.0, 0.0), rot=None, rates="dynamic", dt=0.01):
     """A model with stated parameters, through the model file's section."""
-    rot = np.zeros(12) if rot is None else np.asarray(rot, float)
+    rot = np.zeros(13) if rot is None else np.asarray(rot, float)
     return QuadPhysics.from_dict({
         "dt": dt, "rates": rates, "drag": True, "gyro": True, "offsets": True,
-        "damping": False, "delay": 0, "max_delay": 0, "gravity": 9.80665, "delays": [0, 0],
+        "damping": False, "reaction": False, "lag": 0.0, "delay": 0, "max_delay": 0, "gravity": 9.80665, "delays": [0, 0],
         "translation": list(trans), "translation_std": [0.0] * 3, "rotation": list(rot),
-        "rotation_std": [0.0] * 12, "start": [0.0] * 9 + [1.0, 0.0, 0.0, 0.0]})
+        "rotation_std": [0.0] * 13, "start": [0.0] * 9 + [1.0, 0.0, 0.0, 0.0]})
 
 
 def _qmul(a, b):
@@ -156,7 +156,7 @@ def test_round_trip_segments_and_errors(tmp_path):
                                    rtol=1e-12, atol=1e-12)
     # altered fields are named (the file re-signed, so that the field check is reached)
     doc = json.loads(path.read_text())
-    for field, value, named in (("rotation", [0.0] * 11, "model.rotation"),
+    for field, value, named in (("rotation", [0.0] * 12, "model.rotation"),
                                 ("rates", "spin", "model.rates"),
                                 ("delays", [0, 9], "model.delays"),
                                 ("translation", [0.0, "x", 1.0], "model.translation")):

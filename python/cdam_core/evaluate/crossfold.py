@@ -5,13 +5,16 @@ For one fold: the training flights are those of the other types; the ARX baselin
 chosen on them alone (``baselines.select_arx``: the last run of each training type, by file
 name, is the validation record, the rest is fitted; the chosen orders are refitted on all
 training flights), and a full-state ARX(1) (na = nb = nk = 1) is fitted on all training flights.
-Both and the naive predictor are scored on every flight of the test type at every horizon
-1..50 (k-step from the measured state with the measured inputs; the benchmark's metrics per
-group, ``evaluate.groups``).
+With ``physics`` the physics flight model (``models.flight.physics.QuadPhysics``, least
+squares on all training flights, input delays chosen on them) is fitted twice: ``physics``
+integrates the rotational dynamics, ``physics_hold`` holds the body rates over the prediction
+(the benchmark paper's physics model). Every model and the naive predictor are scored on every
+flight of the test type at every horizon 1..50, on the same rows (k-step from the measured
+state with the measured inputs; the benchmark's metrics per group, ``evaluate.groups``).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +23,7 @@ from cdam_core.evaluate.baselines import ARX_GRID, select_arx
 from cdam_core.evaluate.groups import NANODRONE_GROUPS
 from cdam_core.evaluate.horizons import HorizonScores, score_horizons
 from cdam_core.models.arx import ArxModel
+from cdam_core.models.flight.physics import QuadPhysics
 from cdam_core.record.realdata.nanodrone import load_nanodrone, trajectory_type
 from cdam_core.record.stack import stack_records
 
@@ -30,7 +34,9 @@ TYPES = ("square", "random1", "random2", "multisine")
 
 @dataclass
 class Fold:
-    """One fold's result: scores of ``naive``, ``arx1`` and ``arx`` (chosen orders)."""
+    """One fold's result: scores of ``naive``, ``arx1`` and ``arx`` (chosen orders), and with
+    ``physics`` of ``physics`` and ``physics_hold``; ``parameters``: each physics model's
+    {name: (value, std)}."""
 
     test_type: str
     train_files: list[str]
@@ -38,18 +44,23 @@ class Fold:
     orders: tuple
     validation: dict
     scores: HorizonScores
+    parameters: dict = field(default_factory=dict)
 
     def to_json(self) -> dict:
         return {"test_type": self.test_type, "train_files": self.train_files,
                 "test_files": self.test_files, "arx_orders": list(self.orders),
                 "arx_validation": {",".join(map(str, k)): v for k, v in self.validation.items()},
+                "physics_parameters": {name: {k: {"value": v, "std": s}
+                                              for k, (v, s) in p.items()}
+                                       for name, p in self.parameters.items()},
                 **self.scores.to_json()}
 
 
 def cross_trajectory_fold(files, test_type: str, horizon: int = 50, grid=ARX_GRID,
-                          select_horizons=(1, 10, 25, 50), loaded: dict | None = None) -> Fold:
+                          select_horizons=(1, 10, 25, 50), loaded: dict | None = None,
+                          physics: bool = True) -> Fold:
     """Run one fold (module doc) on the flights ``files``; ``loaded``: a {path: Dataset}
-    cache shared between folds (filled here)."""
+    cache shared between folds (filled here); ``physics``: score the physics models too."""
     files = [Path(f) for f in files]
     loaded = {} if loaded is None else loaded
     for f in files:
@@ -67,16 +78,25 @@ def cross_trajectory_fold(files, test_type: str, horizon: int = 50, grid=ARX_GRI
     groups = list(NANODRONE_GROUPS)
     arx, orders, val = select_arx(st_fit, st_valid, grid, select_horizons, groups)
     arx1 = ArxModel((1, 1, 1)).fit(st_train.U, st_train.Y, segments=st_train.lengths)
+    others = {"arx": arx}
+    if physics:
+        dt = float(np.median(np.diff(st_train.t)))
+        for name, rates in (("physics", "dynamic"), ("physics_hold", "hold")):
+            others[name] = QuadPhysics(dt=dt, rates=rates).fit(st_train.U, st_train.Y,
+                                                               segments=st_train.lengths)
     hs = list(range(1, horizon + 1))
     kw = dict(segments=st_test.lengths, free_run=False, groups=groups,
-              first=max(arx.t0, arx1.t0))
+              first=max([arx1.t0] + [m.t0 for m in others.values()]))
     sc = score_horizons(arx1, st_test.U, st_test.Y, st_test.outputs, hs, **kw)
     sc.free_run.clear()
     for store in (sc.rmse, sc.mae, sc.group_rmse, sc.group_mae):
         store["arx1"] = store.pop("model")
-    other = score_horizons(arx, st_test.U, st_test.Y, st_test.outputs, hs, **kw)
-    sc.add(other, "model", "arx")
-    return Fold(test_type, [str(f) for f in train], [str(f) for f in test], orders, val, sc)
+    for name, model in others.items():
+        sc.add(score_horizons(model, st_test.U, st_test.Y, st_test.outputs, hs, **kw),
+               "model", name)
+    params = {k: m.parameters() for k, m in others.items() if k.startswith("physics")}
+    return Fold(test_type, [str(f) for f in train], [str(f) for f in test], orders, val, sc,
+                params)
 
 
 def mean_over_folds(folds) -> HorizonScores:

@@ -11,6 +11,7 @@ body rates w = (wx, wy, wz) (rad/s). With f_i = w_i^2 and n = R(q) e3 the body's
     v' = (kT/m) sum f_i n - g e3 - dxy v - (dz - dxy) n (n . v)        (linear drag optional)
     q' = 1/2 q (x) (w, 0)                                               (body rates)
     w' = b o tau(f) + c o (wy wz, wx wz, wx wy) + e - k o w             (rates="dynamic")
+         + r_z (0, 0, sum s_i w_i')                                     (reaction=True)
 
 with the X-configuration torque combinations tau = (-f1 - f2 + f3 + f4, -f1 + f2 + f3 - f4,
 -f1 + f2 - f3 + f4) (roll: the left rotors M3, M4 lift the right side; pitch: the rear rotors
@@ -23,7 +24,15 @@ parameters the flights identify (a mass is never weighed by a flight):
   rigid-body coupling ``c = ((Jy - Jz)/Jx, (Jz - Jx)/Jy, (Jx - Jy)/Jz)`` (with ``gyro=True``),
   estimated freely (not tied to b); ``e`` a constant angular acceleration per axis
   (``offsets=True``: a centre of mass off the rotors' centre, unequal rotors); ``k`` (1/s) the
-  rotors' aerodynamic rate damping per axis (``damping=True``).
+  rotors' aerodynamic rate damping per axis (``damping=True``); ``r_z`` the yaw reaction of
+  accelerating rotors (rotor inertia over Jz, ``reaction=True``; s = (-1, 1, -1, 1) as in the
+  yaw combination, w_i' the backward difference of the logged speed).
+
+Actuation lag (``lag`` = T > 0, s): f_i is replaced by its first-order lag with time constant T,
+a discrete kernel (1 - a) a^j on f_i(t - d - j), j = 0..L-1 (a = exp(-dt/T), L = ceil(5 T/dt),
+weights normalised to sum 1) in both the thrust and the torques: a motor that follows its
+logged speed late, or a thrust that builds up behind the rotor speed. T is a stated value; it is
+searched by held-out multi-step error outside the model (the residual step of [flights]).
 
 ``physical(mass, arm)`` turns them into kT, kQ, Jx, Jy, Jz for a stated mass and arm length.
 
@@ -62,7 +71,8 @@ __all__ = ["QuadPhysics", "STATES", "G0", "torque_combinations", "quat_rotate_e3
 STATES = ("x", "y", "z", "vx", "vy", "vz", "qx", "qy", "qz", "qw", "wx", "wy", "wz")
 G0 = 9.80665          # m/s^2, standard gravity
 RATES = ("dynamic", "hold")
-N_TRANS, N_ROT = 3, 12  # slots: [kT/m, drag_xy, drag_z], [b (3), c (3), e (3), k (3)]
+N_TRANS, N_ROT = 3, 13  # slots: [kT/m, drag_xy, drag_z], [b (3), c (3), e (3), k (3), r_z]
+YAW_SPIN = np.array([-1.0, 1.0, -1.0, 1.0])   # the yaw combination's sign per rotor
 
 
 def torque_combinations(f: np.ndarray) -> np.ndarray:
@@ -143,6 +153,8 @@ class QuadPhysics(Model):
         gyro: fit the rigid-body coupling c; False: c = 0.
         offsets: fit the constant angular acceleration e; False: e = 0.
         damping: fit the rate damping k; False: k = 0.
+        reaction: fit the yaw reaction torque of accelerating rotors r_z; False: r_z = 0.
+        lag: first-order actuation lag T (s) on the squared rotor speeds; 0: none.
         delay: input delay in samples of both equation groups, or None: each chosen on the
             training records among 0..max_delay.
         max_delay: the largest delay tried (samples).
@@ -153,8 +165,8 @@ class QuadPhysics(Model):
     fits_segments = True
 
     def __init__(self, dt: float = 0.01, rates: str = "dynamic", drag: bool = True,
-                 gyro: bool = True, offsets: bool = True, damping: bool = False, delay=None,
-                 max_delay: int = 5,
+                 gyro: bool = True, offsets: bool = True, damping: bool = False,
+                 reaction: bool = False, lag: float = 0.0, delay=None, max_delay: int = 5,
                  gravity: float = G0):
         self.dt = dt
         self.rates = rates
@@ -162,6 +174,8 @@ class QuadPhysics(Model):
         self.gyro = gyro
         self.offsets = offsets
         self.damping = damping
+        self.reaction = reaction
+        self.lag = lag
         self.delay = delay
         self.max_delay = max_delay
         self.gravity = gravity
@@ -172,7 +186,10 @@ class QuadPhysics(Model):
         finite_float(self.gravity, "gravity", minimum=0.0)
         if self.rates not in RATES:
             raise ValueError(f"rates: unknown {self.rates!r}; use 'dynamic' or 'hold'")
-        for name in ("drag", "gyro", "offsets", "damping"):
+        finite_float(self.lag, "lag", minimum=0.0)
+        if self.lag > 100 * self.dt:
+            raise ValueError(f"lag: {self.lag} s is more than 100 samples of dt")
+        for name in ("drag", "gyro", "offsets", "damping", "reaction"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise ValueError(f"{name}: expected True or False, got {getattr(self, name)!r}")
         positive_int(self.max_delay, "max_delay", minimum=0)
@@ -182,7 +199,29 @@ class QuadPhysics(Model):
     # -- protocol --------------------------------------------------------------------------
     @property
     def t0(self) -> int:
-        return 1 + max(self.delays_) if hasattr(self, "delays_") else 1
+        return 1 + self._span() + (max(self.delays_) if hasattr(self, "delays_") else 0)
+
+    def _kernel(self) -> np.ndarray:
+        """Weights of f(t - d - j), j = 0.. (the actuation lag; [1] without one)."""
+        if not self.lag:
+            return np.ones(1)
+        a = np.exp(-float(self.dt) / float(self.lag))
+        w = (1 - a) * a ** np.arange(int(np.ceil(5 * float(self.lag) / float(self.dt))))
+        return w / w.sum()
+
+    def _span(self) -> int:
+        """Input rows before t - d that the drive at t uses."""
+        return len(self._kernel()) - 1 + (1 if self.reaction else 0)
+
+    def _drive(self, U, idx, d):
+        """The squared rotor speeds driving the step from each row of ``idx`` (lagged, delayed
+        by d), and the yaw rotor-acceleration term (None without ``reaction``)."""
+        w = self._kernel()
+        f = sum(w[j] * U[idx - d - j] ** 2 for j in range(len(w)))
+        acc = None
+        if self.reaction:
+            acc = (U[idx - d] - U[idx - d - 1]) @ YAW_SPIN / float(self.dt)
+        return f, acc
 
     def _check_shapes(self, U, Y):
         if U.shape[1] != 4:
@@ -192,7 +231,7 @@ class QuadPhysics(Model):
             raise ValueError(f"Y: the quad_physics model needs the 13 states "
                              f"{' '.join(STATES)}, got {Y.shape[1]} columns")
 
-    def _equations(self, U, Y, bounds, d_max):
+    def _equations(self, Y, bounds, d_max):
         """Per segment, the rows t = a + d_max .. b - 2 of the discretised equations: left-hand
         sides (dv (n, 3), dw (n, 3)), mid-state (v, n, w), and the row indices t."""
         rows = [np.arange(a + d_max, b - 1) for a, b in bounds if b - 1 > a + d_max]
@@ -210,9 +249,9 @@ class QuadPhysics(Model):
         dw = (Y[t + 1, 10:13] - Y[t, 10:13]) / dt
         return dv, dw, vm, quat_rotate_e3(qm), wm, t
 
-    def _trans_system(self, f, dv, vm, n, t, d):
+    def _trans_system(self, U, dv, vm, n, t, d):
         """Stacked translational equations (3 rows per sample): A theta = b."""
-        s = f[t - d].sum(axis=1)
+        s = self._drive(U, t, d)[0].sum(axis=1)
         cols = [(s[:, None] * n).ravel()]
         if self.drag:
             nv = np.sum(n * vm, axis=1)[:, None]
@@ -220,8 +259,9 @@ class QuadPhysics(Model):
         b = (dv + np.array([0.0, 0.0, float(self.gravity)])).ravel()
         return np.stack(cols, axis=1), b
 
-    def _rot_system(self, f, dw, wm, t, d, axis):
-        tau = torque_combinations(f[t - d])
+    def _rot_system(self, U, dw, wm, t, d, axis):
+        f, acc = self._drive(U, t, d)
+        tau = torque_combinations(f)
         cols = [tau[:, axis]]
         if self.gyro:
             cols.append(_gyro_products(wm)[:, axis])
@@ -229,19 +269,20 @@ class QuadPhysics(Model):
             cols.append(np.ones(len(t)))
         if self.damping:
             cols.append(-wm[:, axis])
+        if self.reaction and axis == 2:
+            cols.append(acc)
         return np.stack(cols, axis=1), dw[:, axis]
 
     def _fit(self, U, Y, bounds=None):
         self._check_params()
         self._check_shapes(U, Y)
         bounds = bounds or [(0, U.shape[0])]
-        f = U * U
         cands = [int(self.delay)] if self.delay is not None else \
             list(range(int(self.max_delay) + 1))
         d_max = max(cands)
-        dv, dw, vm, n, wm, t = self._equations(U, Y, bounds, d_max)
+        dv, dw, vm, n, wm, t = self._equations(Y, bounds, d_max + self._span())
         # translation: the delay with the least equation residual on the same rows
-        fits = {d: _ols(*self._trans_system(f, dv, vm, n, t, d)) for d in cands}
+        fits = {d: _ols(*self._trans_system(U, dv, vm, n, t, d)) for d in cands}
         d_trans = min(cands, key=lambda d: (fits[d][2], d))
         th, sd, _ = fits[d_trans]
         trans, trans_std = np.zeros(N_TRANS), np.zeros(N_TRANS)
@@ -253,7 +294,7 @@ class QuadPhysics(Model):
             sse = {}
             per = {}
             for d in cands:
-                per[d] = [_ols(*self._rot_system(f, dw, wm, t, d, j)) for j in range(3)]
+                per[d] = [_ols(*self._rot_system(U, dw, wm, t, d, j)) for j in range(3)]
                 sse[d] = sum(p[2] for p in per[d])
             d_rot = min(cands, key=lambda d: (sse[d], d))
             self.delay_fit_["rotation"] = {int(d): v for d, v in sse.items()}
@@ -262,6 +303,8 @@ class QuadPhysics(Model):
             for j, (th, sd, _) in enumerate(per[d_rot]):
                 for k, slot in enumerate(used):
                     rot[3 * slot + j], rot_std[3 * slot + j] = th[k], sd[k]
+                if self.reaction and j == 2:
+                    rot[12], rot_std[12] = th[-1], sd[-1]
         self.rot_, self.rot_std_ = rot, rot_std
         self.delays_ = (int(d_trans), int(d_rot))
         self.n_inputs_, self.n_outputs_ = 4, len(STATES)
@@ -270,44 +313,38 @@ class QuadPhysics(Model):
         self.y_start_ = start
 
     # -- prediction ------------------------------------------------------------------------
-    def _held(self, u_trans, u_rot):
-        """Per window: the thrust term (W,) and the held angular acceleration (W, 3)."""
-        thrust = self.trans_[0] * np.sum(u_trans * u_trans, axis=1)
-        if self.rates == "hold":
-            return thrust, None
-        b, e = self.rot_[0:3], self.rot_[6:9]
-        return thrust, b * torque_combinations(u_rot * u_rot) + e
-
-    def _step(self, X, u_trans, u_rot):
-        thrust, acc = self._held(u_trans, u_rot)
-        rot = None if self.rates == "hold" else self.rot_[3:12]
+    def _step(self, X, U, idx):
+        """One step from the states X (rows ``idx`` of the inputs U drive it)."""
+        dT, dR = self.delays_
+        thrust = self.trans_[0] * np.sum(self._drive(U, idx, dT)[0], axis=1)
+        acc, rot = None, None
+        if self.rates == "dynamic":
+            f, yaw = self._drive(U, idx, dR)
+            acc = self.rot_[0:3] * torque_combinations(f) + self.rot_[6:9]
+            if yaw is not None:
+                acc[:, 2] += self.rot_[12] * yaw
+            rot = self.rot_[3:12]
+        X = X.astype(np.float64, copy=True)
+        X[:, 6:10] = _normalised(X[:, 6:10])
         return rk4_step(X, thrust, acc, self.trans_, rot, float(self.dt), float(self.gravity))
 
     def _one_step(self, U, Y):
-        t0, (dT, dR) = self.t0, self.delays_
-        n = U.shape[0]
-        prev = np.arange(t0 - 1, n - 1)
-        X = Y[prev].astype(np.float64, copy=True)
-        X[:, 6:10] = _normalised(X[:, 6:10])
-        return self._step(X, U[prev - dT], U[prev - dR])
+        prev = np.arange(self.t0 - 1, U.shape[0] - 1)
+        return self._step(Y[prev], U, prev)
 
     def _windows_one_step(self, u, z, W, t0):
         """The last row of each of W stacked windows of t0 + 1 rows from the row before it."""
-        dT, dR = self.delays_
         base = np.arange(W) * (t0 + 1) + t0 - 1
-        X = z[base].astype(np.float64, copy=True)
-        X[:, 6:10] = _normalised(X[:, 6:10])
-        return self._step(X, u[base - dT], u[base - dR])
+        return self._step(z[base], u, base)
 
     def _free_run(self, U, Y0):
-        t0, (dT, dR) = self.t0, self.delays_
+        t0 = self.t0
         n = U.shape[0]
         P = np.zeros((n, len(STATES)))
         P[:t0] = Y0
-        X = Y0[t0 - 1:t0].astype(np.float64, copy=True)
-        X[:, 6:10] = _normalised(X[:, 6:10])
+        X = Y0[t0 - 1:t0]
         for t in range(t0, n):
-            X = self._step(X, U[t - 1 - dT:t - dT], U[t - 1 - dR:t - dR])
+            X = self._step(X, U, np.array([t - 1]))
             if not np.all(np.isfinite(X)):
                 raise ValueError("model: the free-run simulation diverged (NaN or Inf)")
             P[t] = X[0]
@@ -317,7 +354,7 @@ class QuadPhysics(Model):
     def _names(self):
         trans = ["kT/m", "drag_xy", "drag_z"]
         rot = ["b_x", "b_y", "b_z", "c_x", "c_y", "c_z", "e_x", "e_y", "e_z", "k_x", "k_y",
-               "k_z"]
+               "k_z", "r_z"]
         return trans, rot
 
     def parameters(self) -> dict:
@@ -329,7 +366,8 @@ class QuadPhysics(Model):
         out = {trans[k]: (float(self.trans_[k]), float(self.trans_std_[k])) for k in used_t}
         if self.rates == "dynamic":
             used_r = [0, 1, 2] + ([3, 4, 5] if self.gyro else []) + \
-                ([6, 7, 8] if self.offsets else []) + ([9, 10, 11] if self.damping else [])
+                ([6, 7, 8] if self.offsets else []) + ([9, 10, 11] if self.damping else []) + \
+                ([12] if self.reaction else [])
             out.update({rot[k]: (float(self.rot_[k]), float(self.rot_std_[k])) for k in used_r})
         out["delay_translation"] = (self.delays_[0], None)
         if self.rates == "dynamic":
@@ -359,7 +397,8 @@ class QuadPhysics(Model):
         self._check_fitted()
         return {"dt": float(self.dt), "rates": self.rates, "drag": bool(self.drag),
                 "gyro": bool(self.gyro), "offsets": bool(self.offsets),
-                "damping": bool(self.damping),
+                "damping": bool(self.damping), "reaction": bool(self.reaction),
+                "lag": float(self.lag),
                 "delay": None if self.delay is None else int(self.delay),
                 "max_delay": int(self.max_delay), "gravity": float(self.gravity),
                 "delays": [int(d) for d in self.delays_],
@@ -373,7 +412,8 @@ class QuadPhysics(Model):
     def from_dict(cls, d: dict) -> "QuadPhysics":
         try:
             m = cls(dt=d["dt"], rates=d["rates"], drag=d["drag"], gyro=d["gyro"],
-                    offsets=d["offsets"], damping=d["damping"], delay=d["delay"], max_delay=d["max_delay"],
+                    offsets=d["offsets"], damping=d["damping"], reaction=d["reaction"],
+                    lag=d["lag"], delay=d["delay"], max_delay=d["max_delay"],
                     gravity=d["gravity"])
         except ValueError as exc:
             raise ValueError(f"model.{exc}") from None
