@@ -81,8 +81,11 @@ def _mixer_inverse(T, tau, tr):
     return np.linalg.solve(M, np.r_[T, tau])
 
 
-def flight(seconds=30.0, dt=0.01, seed=0, truth=TRUTH, noise=NOISE, excite=1.0):
-    """(U (N, 4) rotor speeds in rad/s, Y (N, 13) measured states, Ytrue (N, 13))."""
+def flight(seconds=30.0, dt=0.01, seed=0, truth=TRUTH, noise=NOISE, excite=1.0, lag=0.0):
+    """(U (N, 4) rotor speeds in rad/s, Y (N, 13) measured states, Ytrue (N, 13)).
+    ``lag`` (s): the rotors' thrust and drag torque follow the logged speed squared through a
+    first-order lag of this time constant (integrated with the body, exact exponential per
+    sub-step); 0: at once."""
     rng = np.random.default_rng(seed)
     n = int(round(seconds / dt))
     t = np.arange(n) * dt
@@ -104,6 +107,7 @@ def flight(seconds=30.0, dt=0.01, seed=0, truth=TRUTH, noise=NOISE, excite=1.0):
     exc *= excite * np.array([2.0, 2.0, 1.0]) * J * 40.0
     s = np.zeros(18)
     s[0:3] = ref[0]
+    act = None                 # the lagged squared speeds acting on the body
     s[6:15] = np.eye(3).ravel()
     U = np.zeros((n, 4))
     Y = np.zeros((n, 13))
@@ -139,12 +143,18 @@ def flight(seconds=30.0, dt=0.01, seed=0, truth=TRUTH, noise=NOISE, excite=1.0):
         tau = J * (-120.0 * eR - 18.0 * w_m) + exc[k]
         om2 = np.clip(_mixer_inverse(T, tau, truth), 200.0 ** 2, 3000.0 ** 2)
         U[k] = np.sqrt(om2)
-        # plant: RK4 sub-steps with the rotor speeds held
+        # plant: RK4 sub-steps with the rotor speeds held (the lagged ones per sub-step)
+        if act is None:
+            act = om2.copy()
         for _ in range(SUB):
-            k1 = _deriv(s, om2, truth)
-            k2 = _deriv(s + 0.5 * h * k1, om2, truth)
-            k3 = _deriv(s + 0.5 * h * k2, om2, truth)
-            k4 = _deriv(s + h * k3, om2, truth)
+            if lag > 0:
+                act = om2 + (act - om2) * np.exp(-h / lag)
+            else:
+                act = om2
+            k1 = _deriv(s, act, truth)
+            k2 = _deriv(s + 0.5 * h * k1, act, truth)
+            k3 = _deriv(s + 0.5 * h * k2, act, truth)
+            k4 = _deriv(s + h * k3, act, truth)
             s = s + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
             s[6:15] = _orthonormal(s[6:15].reshape(3, 3)).ravel()
     return U, Y, Yt
