@@ -201,3 +201,11 @@ def test_actuation_lag_found_on_held_out_data():
     for name in ("kT/m", "b_x", "b_y", "b_z"):
         assert abs(fits[0.03][name][0] / truth[name] - 1) < 0.03, (name, fits[0.03][name])
     assert fits[0.0]["b_x"][0] < 0.9 * truth["b_x"]
+
+
+def test_physical_values_for_a_stated_mass_and_arm():
+    p = _fitted().physical(0.040, 0.050)          # the generator's mass and arm
+    for name, true in (("kT", 3.0e-8), ("Jx", 1.6e-5), ("Jy", 2.0e-5)):
+        assert abs(p[name][0] / true - 1) < 0.02, (name, p[name])
+    with pytest.raises(ValueError, match="^mass: "):
+        _fitted().physical(0.0, 0.05)

@@ -383,13 +383,16 @@ class QuadPhysics(Model):
         mass = finite_float(mass, "mass", minimum=0.0, strict=True)
         arm = finite_float(arm, "arm", minimum=0.0, strict=True)
         a = arm / np.sqrt(2.0)
-        kt, kt_s = self.trans_[0] * mass, self.trans_std_[0] * mass
+        kt, kt_s = float(self.trans_[0] * mass), float(self.trans_std_[0] * mass)
         out = {"kT": (kt, kt_s)}
         if self.rates == "dynamic":
             for j, axis in ((0, "Jx"), (1, "Jy")):
-                b, bs = self.rot_[j], self.rot_std_[j]
-                J = a * kt / b if b != 0 else float("inf")
-                out[axis] = (J, abs(J) * np.hypot(kt_s / kt, bs / b) if b != 0 else None)
+                b, bs = float(self.rot_[j]), float(self.rot_std_[j])
+                if b == 0 or kt == 0:
+                    out[axis] = (float("inf"), None)
+                else:
+                    J = a * kt / b
+                    out[axis] = (J, abs(J) * float(np.hypot(kt_s / kt, bs / b)))
         return out
 
     # -- file --------------------------------------------------------------------------------
