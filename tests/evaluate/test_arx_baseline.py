@@ -47,7 +47,8 @@ def test_cross_trajectory_fold_on_the_flights():
     from cdam_core.record.realdata.nanodrone import nanodrone_files
     fold = cross_trajectory_fold(nanodrone_files(), "square", grid=[(1, 1, 1), (2, 2, 2)])
     sc = fold.scores
-    assert sc.horizons == list(range(1, 51)) and set(sc.group_mae) == {"naive", "arx1", "arx"}
+    assert sc.horizons == list(range(1, 51)) and set(sc.group_mae) == {"naive", "arx1", "arx", "physics",
+                                                             "physics_hold"}
     assert len(fold.test_files) == 5 and len(fold.train_files) == 12
     h50 = sc.horizons.index(50)
     # a linear model beats holding the state at 0.5 s on every group of the square flights

@@ -35,9 +35,15 @@ def register(subparsers) -> None:
                    help="seeds per algorithm (seeds 0..N-1)")
     p.add_argument("--hidden", type=int, default=20)
     p.add_argument("--narx", default=None, help="NARX orders na,nb,nk (default: static map)")
-    p.add_argument("--model", default="bp", choices=["bp", "hybrid"],
+    p.add_argument("--model", default="bp", choices=["bp", "hybrid", "quad_physics"],
                    help="bp: the paper's network (static or NARX); hybrid: linear ARX with the "
-                        "algorithm's network on its residual (needs --narx)")
+                        "algorithm's network on its residual (needs --narx); quad_physics: "
+                        "the quadrotor rigid body on its 4 rotor speeds (rad/s) and 13 states, "
+                        "least squares on the training records (no smoothing, no algorithm; "
+                        "models/flight/physics.py)")
+    p.add_argument("--rates", default="dynamic", choices=["dynamic", "hold"],
+                   help="quad_physics: integrate the rotational dynamics, or hold the body "
+                        "rates (the nano-drone benchmark paper's physics model)")
     p.add_argument("--features", default="raw", choices=["raw", "physics"],
                    help="hybrid inputs: raw, or physics (4 motor commands in X-mixer order: "
                         "commands, thrust ~ sum of squares, roll/pitch/yaw torque combinations)")
@@ -73,6 +79,8 @@ def run(args) -> int:
     mapping = parse_column_map(args.map, "--map")
     read = dict(mapping=mapping, nan=args.nan, loader=args.loader)
     train = stack_records(args.train, inputs=args.inputs, outputs=args.outputs, **read)
+    if args.model == "quad_physics":
+        return _physics(args, train, read)
     if len(train.lengths) > 1 and not args.test:
         raise CliError("--split: needs one contiguous TRAIN record; give --test instead")
     U, Y, t = train.U, train.Y, train.t
@@ -134,5 +142,59 @@ def run(args) -> int:
         from cdam_core.models.file import save_model
         save_model(args.save, models[algos[0]], inputs=train.inputs, outputs=train.outputs,
                    smoothing_passes=args.smoothing)
+        note(args, f"model: {args.save}")
+    return 0
+
+
+def _physics(args, train, read) -> int:
+    """``--model quad_physics``: fit on every training record (segments kept apart), print the
+    parameters with their standard deviations, score a --test record at h = 1, 10, 50 beside
+    the naive predictor, save."""
+    import numpy as np
+
+    from cdam_core.evaluate.groups import NANODRONE_GROUPS
+    from cdam_core.evaluate.horizons import score_horizons
+    from cdam_core.models.flight.physics import STATES, QuadPhysics
+    from cdam_core.record.stack import stack_records
+
+    if len(train.inputs) != 4 or list(train.outputs) != list(STATES):
+        raise CliError(f"--model quad_physics: needs the 4 rotor speeds as inputs and the 13 "
+                       f"states {' '.join(STATES)} as outputs, in this order (got inputs "
+                       f"{', '.join(train.inputs)}; outputs {', '.join(train.outputs)})")
+    if args.split is not None:
+        raise CliError("--model quad_physics: give --test records instead of --split")
+    dts = [float(np.median(np.diff(ds.t))) for ds in train.datasets if len(ds.t) > 1]
+    if not dts or max(dts) / min(dts) - 1 > 0.01:
+        raise CliError("TRAIN: the records are not sampled at one rate")
+    model = QuadPhysics(dt=dts[0], rates=args.rates)
+    try:
+        model.fit(train.U, train.Y, segments=train.lengths)
+    except ValueError as exc:
+        raise CliError(f"TRAIN: {exc}") from None
+    params = model.parameters()
+    print(f"quad_physics ({args.rates} rates) on {len(train.names)} record(s), "
+          f"{len(train.lengths)} segment(s), {len(train.Y)} samples, dt {dts[0]:g} s")
+    for name, (v, s) in params.items():
+        rel = f" ({100 * abs(s / v):.2g} %)" if s is not None and v else ""
+        print(f"  {name:18s} {v:.6g}" + (f" +- {s:.3g}{rel}" if s is not None else ""))
+    result = {"kind": "quad_physics", "rates": args.rates, "dt": dts[0],
+              "train_file": [str(x) for x in args.train],
+              "parameters": {k: {"value": v, "std": s} for k, (v, s) in params.items()}}
+    if args.test:
+        te = stack_records([args.test], inputs=train.inputs, outputs=train.outputs, **read)
+        hs = [h for h in (1, 10, 50) if h + model.t0 < max(te.lengths)]
+        if not hs:
+            raise CliError(f"--test: {args.test} is too short to score")
+        sc = score_horizons(model, te.U, te.Y, te.outputs, hs, segments=te.lengths,
+                            free_run=False, groups=list(NANODRONE_GROUPS))
+        from cdam_core.report.horizons import group_table
+        print(group_table(sc, at=hs))
+        result["test"] = {"file": str(args.test), **sc.to_json()}
+    if args.json:
+        write_json(args.json, result)
+    if args.save:
+        from cdam_core.models.file import save_model
+        save_model(args.save, model, inputs=train.inputs, outputs=train.outputs,
+                   meta={"train": [str(x) for x in args.train]})
         note(args, f"model: {args.save}")
     return 0

@@ -3,7 +3,8 @@
 Layout (JSON; schema: ``model-file.schema.json`` beside this module, documented in
 docs/MODEL_FILE.md)::
 
-    {"format": "cdam-model", "version": 2, "kind": "bp_network" | "arx" | "hybrid" | "greybox",
+    {"format": "cdam-model", "version": 2, "kind": "bp_network" | "arx" | "hybrid" | "greybox"
+                                          | "quad_physics",
      "inputs": [names], "outputs": [names], "preprocessing": {"smoothing_passes": int},
      "meta": {...free JSON...}, "model": {...the kind's section...},
      "monitor": {...optional: the residual monitor's statistics and thresholds...},
@@ -24,6 +25,7 @@ from pathlib import Path
 
 from cdam_core.base.jsonio import plain, write_text_atomic
 from cdam_core.models.arx import ArxModel
+from cdam_core.models.flight.physics import QuadPhysics
 from cdam_core.models.greybox.augmented import GreyBox
 from cdam_core.models.hybrid import HybridNarx
 from cdam_core.models.network import BPNetwork
@@ -33,7 +35,7 @@ from cdam_core.models.schema import validate_document
 FORMAT = "cdam-model"
 VERSION = 2
 KINDS: dict[str, type] = {"bp_network": BPNetwork, "arx": ArxModel, "hybrid": HybridNarx,
-                          "greybox": GreyBox}
+                          "greybox": GreyBox, "quad_physics": QuadPhysics}
 MAX_FILE_BYTES = 256 * 1024 * 1024
 
 __all__ = ["save_model", "load_model", "read_model_file", "ModelFile", "FORMAT", "VERSION",

@@ -1,0 +1,1 @@
+"""Flight models of [flights]: ``physics.QuadPhysics`` (kind ``quad_physics``)."""
