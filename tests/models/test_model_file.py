@@ -7,7 +7,11 @@ import json
 import numpy as np
 import pytest
 
-from cdam_core.models import ArxModel, BPNetwork, HybridNarx, load_model, read_model_file, save_model
+from cdam_core.models import (ArxModel, BPNetwork, HybridNarx, QuadPhysics, load_model,
+                              read_model_file, save_model)
+from cdam_core.models.file import KINDS as FILE_KINDS
+from cdam_core.models.greybox.augmented import GreyBox
+from cdam_core.models.greybox.effects import CoulombFriction
 
 
 def _plant(n=500, seed=0):
@@ -29,13 +33,39 @@ def _motors(n=500, seed=1):
     return U, Y
 
 
+def _axis(n=3000, dt=1e-3):
+    """A rigid axis with dry friction, closed forms in plain numpy (q a sum of sines)."""
+    t = np.arange(n) * dt
+    q = 0.2 * np.sin(2 * np.pi * 0.7 * t) + 0.05 * np.sin(2 * np.pi * 2.3 * t)
+    qd = 2 * np.pi * (0.14 * np.cos(2 * np.pi * 0.7 * t) + 0.115 * np.cos(2 * np.pi * 2.3 * t))
+    qdd = -(2 * np.pi) ** 2 * (0.098 * np.sin(2 * np.pi * 0.7 * t)
+                               + 0.2645 * np.sin(2 * np.pi * 2.3 * t))
+    tau = 0.5 * qdd + 2.0 * qd + 1.0 * np.tanh(qd / 1e-3)
+    return tau[:, None], q[:, None]
+
+
+def _quad():
+    from quad_generator import flight
+    U, Y, _ = flight(6.0, seed=3)
+    return U, Y
+
+
 KINDS = {
     "bp_static": lambda: (BPNetwork(hidden=4, epochs=15, seed=2), _plant()),
     "bp_narx": lambda: (BPNetwork(hidden=4, epochs=15, seed=2, narx=(2, 2, 1)), _plant()),
     "arx_raw": lambda: (ArxModel((2, 2, 0)), _plant()),
     "arx_physics": lambda: (ArxModel((1, 2, 1), "physics"), _motors()),
     "hybrid": lambda: (HybridNarx((2, 2, 0), seed=3), _plant()),
+    "greybox": lambda: (GreyBox("rigid_axis", dt=1e-3, cutoff_hz=40.0,
+                                effects=(CoulombFriction("tau"),)), _axis()),
+    "quad_physics": lambda: (QuadPhysics(), _quad()),
 }
+
+
+def test_every_registered_kind_has_a_round_trip_case():
+    """A new kind added to the model file without a case here fails ([package] item 1)."""
+    covered = {type(KINDS[name]()[0]).kind for name in KINDS}
+    assert covered == set(FILE_KINDS), sorted(set(FILE_KINDS) - covered)
 
 
 @pytest.mark.parametrize("name", list(KINDS))
