@@ -74,7 +74,9 @@ def run(args) -> int:
     read = dict(mapping=mapping, nan=args.nan, loader=args.loader)
     train = stack_records(args.train, inputs=args.inputs, outputs=args.outputs, **read)
     if len(train.lengths) > 1 and not args.test:
-        raise CliError("--split: needs one contiguous TRAIN record; give --test instead")
+        raise CliError(f"--split: needs one contiguous TRAIN record, got {len(train.lengths)} "
+                       f"segments (several records, or gaps declared in a sidecar); give "
+                       f"--test instead")
     U, Y, t = train.U, train.Y, train.t
     records, times, segs = {}, {}, {}
     if args.test:
@@ -117,7 +119,9 @@ def run(args) -> int:
     from cdam_core.report.identify import headline
     result["baselines"] = naive_and_arx(U, Y, records, train.outputs, narx=cfg.narx,
                                         smoothing_passes=cfg.smoothing_passes,
-                                        features=cfg.features)
+                                        features=cfg.features,
+                                        segments=train.lengths if args.test else None,
+                                        record_segments=segs)
     print("\n".join(headline(result)))
     for other, entry in result.get("rank_sum", {}).items():
         for score, v in entry.items():

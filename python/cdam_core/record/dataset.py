@@ -12,8 +12,10 @@ Format (issue "identification", section "The dataset format"):
   DataFrame in and out: ``Dataset.from_dataframe`` / ``Dataset.to_dataframe``.
 - ``FILE.json`` (optional, beside the table): metadata, e.g. ``rate`` (Hz), ``units`` (column ->
   unit), ``source``, ``model`` (declared model), ``inputs``/``outputs`` (default selection),
-  ``segments`` (row ranges a model never predicts across) and anything else a producer wants to
-  keep (gaps, clock offsets, interpolation per column).
+  ``segments`` (row ranges a model never predicts across), declared gaps (``gapless_rows``,
+  ``gaps``: rows inside a gap are left out on reading and the record is cut there; see
+  :mod:`cdam_core.record.columns`) and anything else a producer wants to keep (clock offsets,
+  interpolation per column).
 
 Missing values: an error by default (``nan="error"``), or the record cut into segments around
 them (``nan="split"``); a column map renames the record's columns for a model (``mapping=``,
@@ -37,7 +39,7 @@ import numpy as np
 
 from cdam_core.base.jsonio import plain, write_text_atomic
 from cdam_core.record.columns import (NAN_POLICIES, apply_column_map, check_segments,
-                                      kept_segments, parse_column_map, split_missing)
+                                      gap_cuts, kept_segments, parse_column_map, split_missing)
 from cdam_core.record.parquet import frame_table, read_parquet_table, write_parquet_table
 
 __all__ = [
@@ -420,8 +422,19 @@ def _assemble(where: str, names: list[str], arr: np.ndarray, meta: dict, inputs,
                          f"({t[r - 1]!r} -> {t[r]!r})")
     if side is not None:
         check_sidecar(meta, t, names, side)
-    columns, data = apply_column_map(names[1:], arr[:, 1:], mapping, where)
     meta = dict(meta)
+    if meta.get("gapless_rows") is not None or meta.get("gaps") is not None:
+        keep, segments = gap_cuts(meta, t, str(side or where))
+        if not keep.any():
+            raise ValueError(f"{where}: every row lies inside a declared gap")
+        arr, t = arr[keep], t[keep]
+        meta.pop("gapless_rows", None)      # row numbers before the gap rows were left out
+        meta.pop("segments", None)
+        if len(segments) > 1:
+            meta["segments"] = segments
+        if not keep.all():
+            meta["gap_rows_left_out"] = int((~keep).sum())
+    columns, data = apply_column_map(names[1:], arr[:, 1:], mapping, where)
     if mapping:
         units = dict(meta.get("units") or {})
         meta["units"] = {**{k: v for k, v in units.items() if k in columns},
