@@ -101,15 +101,26 @@ def test_outputs_are_checked_before_computing(tmp_path, capsys):
     assert "does not exist" in _one_line(capsys, "identify")
 
 
-def test_memory_error_is_one_line_exit_3(monkeypatch, capsys):
-    """Every MemoryError ended in a traceback."""
+@pytest.mark.parametrize("exc, code, text", [
+    (MemoryError(), 3, "out of memory"),
+    (PermissionError(13, "Permission denied", "x.csv"), 3, "x.csv: Permission denied"),
+    (IsADirectoryError(21, "Is a directory", "out"), 3, "out: Is a directory"),
+    (NotADirectoryError(20, "Not a directory", "f/x"), 3, "f/x: Not a directory"),
+    (FileExistsError(17, "File exists", "rep"), 3, "rep: File exists"),
+    (ZeroDivisionError("float division by zero"), 2, "division by zero"),
+])
+def test_error_types_that_ended_in_tracebacks_are_one_line(monkeypatch, capsys, exc, code,
+                                                           text):
+    """Every PermissionError, IsADirectoryError, NotADirectoryError, FileExistsError,
+    MemoryError and ZeroDivisionError ended in a traceback: raised from inside a command, each
+    is now one line with its documented exit code."""
     import cdam_core.cli.simulate as sim
 
-    def exhausted(args):
-        raise MemoryError()
-    monkeypatch.setattr(sim, "run", exhausted)
-    assert main(["simulate", "-o", "never.csv"]) == 3
-    assert "out of memory" in _one_line(capsys, "simulate")
+    def fails(args):
+        raise exc
+    monkeypatch.setattr(sim, "run", fails)
+    assert main(["simulate", "-o", "never.csv"]) == code
+    assert text in _one_line(capsys, "simulate")
 
 
 def test_import_ulog_grid_above_the_limit_is_refused(tmp_path, capsys):
