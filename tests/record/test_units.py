@@ -97,3 +97,27 @@ def test_a_physical_model_refuses_units_it_cannot_use(tmp_path, capsys, model, c
     assert rc == 2, err
     assert err.startswith("cdam residual: error: ") and text in err, err
     assert len(err.splitlines()) == 1
+
+
+def test_evaluate_a_greybox_model_on_a_record_of_normalised_commands(tmp_path, capsys):
+    """`cdam evaluate` with a saved grey-box model: the model checks the record's units."""
+    from cdam_core.models import save_model
+    from cdam_core.models.greybox.augmented import GreyBox
+    rng = np.random.default_rng(0)
+    n = 400
+    tau = rng.uniform(-1, 1, n)
+    q = np.cumsum(np.cumsum(tau)) * 1e-5
+    save_model(tmp_path / "gb.json", GreyBox("rigid_axis", 0.01, [], cutoff_hz=20.0).fit(
+        tau[:, None], q[:, None]), inputs=["tau"], outputs=["q"])
+    lines = ["t,tau,q"] + [f"{k / 100!r},{a!r},{b!r}" for k, (a, b) in
+                           enumerate(zip(tau.tolist(), q.tolist()))]
+    rec = tmp_path / "r.csv"
+    rec.write_text("\n".join(lines) + "\n")
+    rec.with_suffix(".json").write_text(json.dumps({"units": {"tau": "normalised command"}}))
+    assert main(["evaluate", str(tmp_path / "gb.json"), str(rec), "--horizon", "2",
+                 "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "tau (column tau) is a normalised command" in err and len(err.splitlines()) == 1
+    rec.with_suffix(".json").write_text(json.dumps({"units": {"tau": "N", "q": "m"}}))
+    assert main(["evaluate", str(tmp_path / "gb.json"), str(rec), "--horizon", "2",
+                 "--quiet"]) == 0
