@@ -134,6 +134,9 @@ def main(argv: list[str] | None = None) -> int:
 
 def _main(argv: list[str] | None) -> int:
     args = None
+
+    def name() -> str:             # the command once it is known
+        return f"cdam {args.command}" if getattr(args, "command", None) else "cdam"
     try:
         parser = build_parser()
         args = parser.parse_args(argv)
@@ -142,19 +145,17 @@ def _main(argv: list[str] | None) -> int:
             return 2
         return int(args.func(args) or 0)
     except KeyboardInterrupt:
-        name = f"cdam {args.command}" if getattr(args, "command", None) else "cdam"
-        print(f"{name}: error: interrupted", file=sys.stderr)
+        print(f"{name()}: error: interrupted", file=sys.stderr)
         return 130
     except (CliError, OSError, MemoryError, ValueError, ArithmeticError, KeyError, TypeError,
             UnicodeError, RecursionError) as exc:
         msg, code = _message(exc)
         msg = " ".join(str(msg).split())          # one line
-        print(f"cdam {args.command}: error: {msg}", file=sys.stderr)
+        print(f"{name()}: error: {msg}", file=sys.stderr)
         return code
     except Exception as exc:  # noqa: BLE001 - a bug; still one line, no traceback
         msg = " ".join(f"{type(exc).__name__}: {exc}".split())
-        print(f"cdam {args.command}: error: internal error ({msg}); please report it",
-              file=sys.stderr)
+        print(f"{name()}: error: internal error ({msg}); please report it", file=sys.stderr)
         return 4
 
 
