@@ -132,3 +132,20 @@ def test_import_ulog_grid_above_the_limit_is_refused(tmp_path, capsys):
     assert main(["import-ulog", str(log), "-o", str(tmp_path / "u.csv"), "--rate", "1e12"]) == 2
     assert "MAX_GRID_SAMPLES" in _one_line(capsys, "import-ulog")
     assert not (tmp_path / "u.csv").exists()
+
+
+def test_arx_fit_on_values_near_1e300_is_a_named_error():
+    """Found by the Python-API fuzz (session 5): ArxModel.fit on values near 1e300 ended in
+    numpy's LinAlgError ('SVD did not converge', naming nothing) or hung in pinv on an
+    overflowed normal matrix. In a child with a timeout, so a hang fails the test."""
+    code = ("import numpy as np, cdam_core\n"
+            "U = np.full((40, 1), 1e300); U[::3] = -1e300; Y = U.copy()\n"
+            "try:\n"
+            "    cdam_core.ArxModel((1, 1, 1)).fit(U, Y)\n"
+            "    print('fitted')\n"
+            "except ValueError as e:\n"
+            "    print(type(e).__name__, e)\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       timeout=120, env=os.environ.copy())
+    assert r.returncode == 0, r.stderr[-1000:]
+    assert r.stdout.startswith("ValueError U, Y: values too large"), r.stdout + r.stderr
