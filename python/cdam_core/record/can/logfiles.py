@@ -221,6 +221,7 @@ class _TolerantBLF:
         self.f.seek(0)
         head = blf.FILE_HEADER_STRUCT.unpack(self.f.read(blf.FILE_HEADER_STRUCT.size))
         if not blf.FILE_HEADER_STRUCT.size <= head[1] <= self.size:
+            self.reader.stop()
             raise ValueError(f"{path}: not a BLF file (file header size {head[1]})")
         self.f.seek(head[1])
         self.tail = b""
