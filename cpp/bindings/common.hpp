@@ -27,11 +27,14 @@ inline void check_status(Status s, const std::string& what) {
 
 enum class Dtype { F32, F64 };
 
-// float32 or float64, else ValueError naming the argument.
+// float32 or float64 (by kind and size, not by the dtype object's identity: an unpickled
+// array, a memmap or a dtype with metadata carries an equal but other object, and a
+// non-native byte order is converted by c_array), else ValueError naming the argument.
 inline Dtype float_dtype(const py::array& a, const char* name) {
-  if (a.dtype().is(py::dtype::of<double>())) return Dtype::F64;
-  if (a.dtype().is(py::dtype::of<float>())) return Dtype::F32;
-  value_error(std::string(name) + ": dtype " + std::string(py::str(a.dtype())) +
+  const py::dtype dt = a.dtype();
+  if (dt.kind() == 'f' && dt.itemsize() == 8) return Dtype::F64;
+  if (dt.kind() == 'f' && dt.itemsize() == 4) return Dtype::F32;
+  value_error(std::string(name) + ": dtype " + std::string(py::str(dt)) +
               " is not supported; pass float32 or float64");
 }
 

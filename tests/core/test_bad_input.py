@@ -73,3 +73,33 @@ def test_random_input_never_crashes(which, a, b, c, k):
 def test_errors_name_the_problem(call, match):
     with pytest.raises(ValueError, match=match):
         call()
+
+
+def _float_dtype_variants(a, folder):
+    """The same float64 / float32 values under dtype objects that are equal to numpy's own but
+    not the same object (an unpickled array, a dtype carrying metadata), a non-native byte
+    order, and a memory-mapped file's array."""
+    import pickle
+    out = {"unpickled": pickle.loads(pickle.dumps(a)),
+           "metadata": a.astype(np.dtype(a.dtype.str, metadata={"unit": "rad"})),
+           "big-endian": a.astype(a.dtype.newbyteorder(">"))}
+    np.save(folder / "a.npy", a)
+    out["memmap"] = np.load(folder / "a.npy", mmap_mode="r")
+    return out
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_equal_float_dtypes_are_accepted_by_the_bindings(dtype, tmp_path):
+    """The bindings compared dtypes by identity, so an unpickled float64 array was refused with
+    'dtype float64 is not supported; pass float32 or float64'. Each variant now gives exactly
+    the plain array's result."""
+    X = np.linspace(-1, 1, 24, dtype=dtype).reshape(12, 2) ** 3
+    want = _core.five_point_cubic_smooth(X, 2)
+    want_f = _core.mlp_forward(np.linspace(-0.5, 0.5, 13).astype(dtype), X, 3, 1)
+    for name, v in _float_dtype_variants(X, tmp_path).items():
+        assert v.dtype == X.dtype.newbyteorder(v.dtype.byteorder) or v.dtype == X.dtype
+        got = _core.five_point_cubic_smooth(v, 2)
+        assert got.dtype == want.dtype, name
+        np.testing.assert_array_equal(got, want, err_msg=name)
+        np.testing.assert_array_equal(_core.mlp_forward(
+            np.linspace(-0.5, 0.5, 13).astype(dtype), v, 3, 1), want_f, err_msg=name)

@@ -211,3 +211,71 @@ def test_a_grid_above_the_limit_is_refused_before_allocating(tmp_path, capsys):
     assert code == 2
     assert "MAX_GRID_SAMPLES" in err and err.count("\n") == 1
     assert not csv.exists()
+
+
+def _write_blf(path, frames, level):
+    """python-can's BLFWriter, 100 frames per container (48-byte objects, 4,800-byte
+    containers), zlib (``level`` -1) or uncompressed (0)."""
+    import can
+    w = can.BLFWriter(str(path), compression_level=level)
+    w.max_container_size = 100 * 48
+    for t, m, data in frames:
+        w.on_message_received(can.Message(timestamp=float(t), arbitration_id=0x200 + m,
+                                          is_extended_id=False, data=data))
+    w.stop()
+
+
+def _containers(blob):
+    """(offset, size) of the top-level objects, walked with struct (file header size at byte 4,
+    then b"LOBJ" headers: signature, header size, version, object size, type)."""
+    pos = struct.unpack_from("<L", blob, 4)[0]
+    out = []
+    while pos < len(blob):
+        sig, _, _, size, _ = struct.unpack_from("<4sHHLL", blob, pos)
+        assert sig == b"LOBJ"
+        out.append((pos, size))
+        pos += size + size % 4
+    return out
+
+
+@pytest.mark.parametrize("where", ["zlib container", "object header"])
+def test_blf_a_bad_object_in_the_middle_is_skipped_and_counted(tmp_path, capsys, where):
+    truth = _truth()
+    frames = _frames(truth)
+    log = tmp_path / "bus.blf"
+    _write_blf(log, frames, -1 if where == "zlib container" else 0)
+    blob = bytearray(log.read_bytes())
+    cons = _containers(blob)
+    c = len(cons) // 2
+    off, size = cons[c]
+    if where == "zlib container":         # a flipped byte inside the compressed stream
+        blob[off + 32 + (size - 32) // 2] ^= 0xFF
+        lost = list(range(100 * c, 100 * (c + 1)))
+    else:                                 # the signature of the 51st object of the container
+        k = 50
+        blob[off + 32 + 48 * k] ^= 0xFF
+        lost = [100 * c + k]
+    log.write_bytes(bytes(blob))
+    code, out, err, csv = _import(tmp_path, log, capsys)
+    assert code == 1, err
+    assert "warning: skipped objects: 1," in err
+    rec, meta = _read(csv)
+    assert meta["skipped_objects"]["count"] == 1
+    if where == "zlib container":
+        assert meta["skipped_objects"]["bytes"] == size + size % 4
+    assert meta["frames"]["feedback"] == 2 * N - len(lost)
+    assert not meta["log_truncated"]
+    # the record goes on to the end of the log, and theta follows the frames kept
+    assert rec["t"][-1] + meta["t0"] >= truth[1]["t"][-1] - T0 - 2 / RATE
+    gone = {(frames[i][0], frames[i][1]) for i in lost}
+    tabs = rec["t"] + meta["t0"] + T0           # BLF keeps times from the first frame
+    for m in (1, 2):
+        tr = truth[m]
+        keep = np.array([(t, m) not in gone for t in tr["t"]])
+        for a, b in meta["gapless_rows"]:
+            exp = np.interp(tabs[a:b], tr["t"][keep], tr["theta"][keep])
+            got = rec[f"theta_m{m}"][a:b]
+            turn = 2 * np.pi / 36
+            off_ = exp[0] - got[0]
+            assert off_ == pytest.approx(round(off_ / turn) * turn, abs=1e-6)
+            np.testing.assert_allclose(got + round(off_ / turn) * turn, exp, atol=1e-6)

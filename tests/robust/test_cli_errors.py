@@ -1,17 +1,23 @@
 """Bad invocations of the CLI, each in a subprocess (issue 24 items 5 and 6): the exit code is the
 documented one, stderr is one line 'cdam COMMAND: error: ...', no traceback anywhere, and no input
 file changes. Input files are written here with plain Python."""
+import functools
 import hashlib
 import json
 import math
 import os
+import shutil
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import pytest
 
 ROOT = os.geteuid() == 0 if hasattr(os, "geteuid") else False
+# root ignores file permissions: the permission cases then run the child as the unprivileged
+# user `nobody` (util-linux setpriv), in a folder that user can reach
+DROP = ["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups"]
 FAST = ["--algo", "bp", "--seeds", "1", "--epochs", "2", "--hidden", "2", "--quiet"]
 
 
@@ -27,6 +33,9 @@ def _record(path: Path, sidecar: dict | None = None, n: int = 400, rate: float =
 
 @pytest.fixture
 def d(tmp_path):
+    if ROOT:        # pytest's tmp_path is under a 0700 folder of root's: nobody cannot enter
+        tmp_path = Path(tempfile.mkdtemp(prefix="cdam-perm-"))
+        tmp_path.chmod(0o755)
     _record(tmp_path / "data.csv", {"rate": 1000.0, "inputs": ["tau"], "outputs": ["q"]})
     _record(tmp_path / "other.csv", {"rate": 1000.0})
     _record(tmp_path / "slow.csv", {"rate": 10.0})                     # declared 10 Hz, 1 kHz
@@ -47,6 +56,32 @@ def d(tmp_path):
     yield tmp_path
     locked.chmod(0o644)
     ro.chmod(0o755)
+    if ROOT:
+        shutil.rmtree(tmp_path)
+
+
+@functools.lru_cache(maxsize=None)
+def _why_not_unprivileged() -> str:
+    """Why the child cannot run as `nobody` here ("" when it can)."""
+    if shutil.which("setpriv") is None:
+        return "util-linux setpriv is missing"
+    r = subprocess.run([*DROP, sys.executable, "-c", "import cdam_core.cli.main"],
+                       capture_output=True, text=True, timeout=120, cwd="/",
+                       env=os.environ.copy())
+    return "" if r.returncode == 0 else ("the unprivileged user cannot run the package here "
+                                         f"(python, source or extension not readable): "
+                                         f"{r.stderr[-300:]}")
+
+
+def _unprivileged() -> list:
+    """The command prefix that runs the child as `nobody` when the tests run as root ([] when
+    they do not); skips, with the reason, where that is impossible."""
+    if not ROOT:
+        return []
+    why = _why_not_unprivileged()
+    if why:
+        pytest.skip(f"running as root (which ignores file permissions) and {why}")
+    return DROP
 
 
 # (name, argv with {d} for the folder, expected exit code, text the message must contain)
@@ -106,12 +141,12 @@ def _hashes(d: Path) -> dict:
 
 @pytest.mark.parametrize("name,argv,code,text", CASES, ids=[c[0] for c in CASES])
 def test_bad_invocation_is_one_line_and_touches_no_input(d, name, argv, code, text):
-    if name in NEEDS_NON_ROOT and ROOT:
-        pytest.skip("root ignores file permissions")
+    prefix = _unprivileged() if name in NEEDS_NON_ROOT else []
     before = _hashes(d)
-    r = subprocess.run([sys.executable, "-m", "cdam_core.cli.main",
+    r = subprocess.run([*prefix, sys.executable, "-m", "cdam_core.cli.main",
                         *[a.format(d=d) for a in argv]],
-                       capture_output=True, text=True, timeout=300, env=os.environ.copy())
+                       capture_output=True, text=True, timeout=300, env=os.environ.copy(),
+                       cwd=d)
     assert "Traceback" not in r.stdout + r.stderr, r.stderr
     assert r.returncode == code, r.stderr
     after = _hashes(d)

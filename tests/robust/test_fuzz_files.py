@@ -1,10 +1,11 @@
-"""Mutation fuzz of the files users hand to `cdam` (issue 24 item 8): dataset CSVs with their
-sidecars, model files of every kind and CAN logs, mutated byte- and line-wise with a seeded
+"""Mutation fuzz of the files users hand to `cdam` (issue 24 item 8): dataset CSVs and Parquet
+files with their sidecars, model files of every kind, CAN logs (candump, BLF, ASC) and a PX4
+ULog (the shared sample, when present), mutated byte- and line-wise with a seeded
 generator, run through the command line in a child process. A finding is a crash (the child
 dies), a traceback, an exception escaping `main`, or exit code 4 (internal error): every bad file
 must end in a named error (exit 2 or 3) or a completed run (0, or 1 for a partial import).
 
-CI runs a small budget per family; ``pytest -m fuzz tests/robust`` runs the long one (2,000 per
+CI runs a small budget per family; ``pytest -m fuzz tests/robust`` runs the long one (800 per
 family) and prints the counts."""
 import json
 import os
@@ -18,6 +19,7 @@ import pytest
 from cdam_core.models import ArxModel, BPNetwork, HybridNarx, save_model
 from cdam_core.models.greybox.augmented import GreyBox
 from cdam_core.models.greybox.effects import CoulombFriction
+from cdam_core.record.realdata import shared_data_dir
 
 ALLOWED = {0, 1, 2, 3}
 WORKER = Path(__file__).with_name("_fuzz_worker.py")
@@ -74,12 +76,25 @@ def _seeds(folder: Path) -> dict:
         path = folder / f"model_{name}.json"
         save_model(path, m.fit(U, Y), inputs=["u"], outputs=["y"])
         models[name] = path
+    can_frames = [(1000 + k / 1000, 0x200 + m, bytes.fromhex(
+        f"{(k * 37 % 8192):04X}{(k % 200):04X}{(k * 3 % 4000):04X}0000"))
+        for k in range(400) for m in (1, 2)]
     can = folder / "can.log"
     with open(can, "w") as f:
-        for k in range(400):
-            for m in (1, 2):
-                f.write(f"({1000 + k / 1000:.6f}) can0 {0x200 + m:03X}#"
-                        f"{(k * 37 % 8192):04X}{(k % 200):04X}{(k * 3 % 4000):04X}0000\n")
+        for tf, i, b in can_frames:
+            f.write(f"({tf:.6f}) can0 {i:03X}#{b.hex().upper()}\n")
+    import can as pycan
+    for suffix, writer in ((".blf", pycan.BLFWriter), (".asc", pycan.ASCWriter)):
+        w = writer(str(folder / f"can{suffix}"))
+        if suffix == ".blf":
+            w.max_container_size = 48 * 100         # 100 frames per zlib container
+        for tf, i, b in can_frames:
+            w.on_message_received(pycan.Message(timestamp=tf, arbitration_id=i,
+                                                is_extended_id=False, data=b))
+        w.stop()
+    import pandas as pd
+    pd.DataFrame({"t": t, "u": u, "y": y}).to_parquet(folder / "data.parquet")
+    ulog = shared_data_dir() / "ulog" / "sample_appended_multiple.ulg"
     return {
         "csv": (data.read_bytes(), ["evaluate", str(models["arx"]), "{}", "--horizon", "3",
                                     "--quiet"], ".csv", (folder / "data.json").read_bytes()),
@@ -89,7 +104,15 @@ def _seeds(folder: Path) -> dict:
         **{f"model_{k}": (p.read_bytes(), ["evaluate", "{}", str(data), "--horizon", "2",
                                            "--quiet"], ".json", None)
            for k, p in models.items()},
+        "parquet": ((folder / "data.parquet").read_bytes(),
+                    ["evaluate", str(models["arx"]), "{}", "--horizon", "3", "--quiet"],
+                    ".parquet", (folder / "data.json").read_bytes()),
         "can_log": (can.read_bytes(), ["import-can", "{}", "-o", "{out}"], ".log", None),
+        **{f"can_{x}": ((folder / f"can.{x}").read_bytes(),
+                        ["import-can", "{}", "-o", "{out}"], f".{x}", None)
+           for x in ("blf", "asc")},
+        **({"ulog": (ulog.read_bytes(), ["import-ulog", "{}", "-o", "{out}", "--rate", "50"],
+                     ".ulg", None)} if ulog.is_file() else {}),
     }
 
 
@@ -161,7 +184,7 @@ def _check(tmp_path, per_family, seed):
 
 
 def test_mutated_files_end_in_named_errors(tmp_path):
-    _check(tmp_path, per_family=25, seed=1)
+    _check(tmp_path, per_family=20, seed=1)
 
 
 @pytest.mark.fuzz

@@ -47,3 +47,40 @@ def test_sigint_stops_a_long_native_loop(expr, setup):
     assert res["seconds"] is not None, f"still running {GRACE} s after SIGINT: {res}"
     assert res["type"] == "KeyboardInterrupt", res
     assert res["returncode"] == 0, res
+
+
+START = ("import sys\nprint('ready', flush=True)\n"
+         "from cdam_core.cli.main import main\nsys.exit(main())\n")   # what the `cdam` script does
+
+
+@pytest.mark.parametrize("delay", [0.05, 0.3, 1.5])
+def test_sigint_at_start_up_is_one_line_and_130(tmp_path, delay):
+    """Ctrl-C while `cdam` imports its modules (0.05 s and 0.3 s after the interpreter is up:
+    the imports take about 0.6 s here) or once the command runs: exit 130, one line on stderr,
+    no traceback (before, an interrupt during the imports printed a KeyboardInterrupt
+    traceback and exited 1)."""
+    import os
+    import signal
+    import subprocess
+    import time
+    lines = ["t,u,y"] + [f"{k / 100},{(k * 7 % 13) / 13},{(k * 5 % 11) / 11}" for k in range(300)]
+    (tmp_path / "d.csv").write_text("\n".join(lines) + "\n")
+    argv = ["identify", str(tmp_path / "d.csv"), "--inputs", "u", "--outputs", "y", "--algo",
+            "iboa", "--iterations", "1000000", "--quiet"]
+    p = subprocess.Popen([sys.executable, "-c", START, *argv], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True, env=os.environ.copy())
+    try:
+        assert p.stdout.readline().strip() == "ready"
+        time.sleep(delay)
+        p.send_signal(signal.SIGINT)
+        out, err = p.communicate(timeout=30)
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+    assert "Traceback" not in out + err, err
+    assert p.returncode == 130, err
+    assert err.strip().splitlines() in (["cdam: error: interrupted"],
+                                        ["cdam identify: error: interrupted"]), err
+    if delay < 0.1:         # still importing: the command is not known yet
+        assert err.strip() == "cdam: error: interrupted"

@@ -31,9 +31,6 @@ def as_float_array(x, name: str, ndim: tuple[int, ...] = (2,), min_rows: int = 1
         arr = arr.astype(dtype, copy=False)
     if not arr.dtype.isnative:
         arr = arr.astype(arr.dtype.newbyteorder("="))
-    # numpy's own dtype object: the compiled core matches dtypes by identity, and an array
-    # read back from a file (a memmap, an unpickled array) can carry an equal but other one
-    arr = arr.view(np.float64 if arr.dtype.itemsize == 8 else np.float32)
     if arr.ndim not in ndim:
         want = " or ".join(f"{d}-D" for d in ndim)
         raise ValueError(f"{name}: expected a {want} array, got {arr.ndim}-D with shape {arr.shape}")

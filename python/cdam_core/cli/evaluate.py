@@ -51,6 +51,19 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
+def _check_physical_units(mf, st, paths) -> None:
+    """A grey-box model (physical parameters) checks the declared units of the columns that
+    feed its signals (``GreyBoxModel.check_units``): no normalised command, no other unit."""
+    if getattr(mf.model, "kind", None) != "greybox":
+        return
+    gm = mf.model.declared_model
+    signals = list(gm.inputs) + list(gm.positions)
+    columns = list(mf.inputs[:len(gm.inputs)]) + list(mf.outputs)
+    for ds, path in zip(st.datasets, paths):
+        units = ds.units
+        gm.check_units({s: (c, units.get(c)) for s, c in zip(signals, columns)}, str(path))
+
+
 def run(args) -> int:
     import numpy as np
 
@@ -84,6 +97,7 @@ def run(args) -> int:
     read = dict(inputs=mf.inputs, outputs=mf.outputs, mapping=mapping, nan=args.nan,
                 loader=args.loader)
     st = stack_records(args.records, **read)
+    _check_physical_units(mf, st, args.records)
     U, Y = _smoothed(st, mf.smoothing_passes)      # as the model's training data
     dts = [float(np.median(np.diff(ds.t))) for ds in st.datasets]
     model_dt = getattr(mf.model, "dt", None)

@@ -82,7 +82,9 @@ def run(args) -> int:
     if args.model == "quad_physics":
         return _physics(args, train, read)
     if len(train.lengths) > 1 and not args.test:
-        raise CliError("--split: needs one contiguous TRAIN record; give --test instead")
+        raise CliError(f"--split: needs one contiguous TRAIN record, got {len(train.lengths)} "
+                       f"segments (several records, or gaps declared in a sidecar); give "
+                       f"--test instead")
     U, Y, t = train.U, train.Y, train.t
     records, times, segs = {}, {}, {}
     if args.test:
@@ -125,7 +127,9 @@ def run(args) -> int:
     from cdam_core.report.identify import headline
     result["baselines"] = naive_and_arx(U, Y, records, train.outputs, narx=cfg.narx,
                                         smoothing_passes=cfg.smoothing_passes,
-                                        features=cfg.features)
+                                        features=cfg.features,
+                                        segments=train.lengths if args.test else None,
+                                        record_segments=segs)
     print("\n".join(headline(result)))
     for other, entry in result.get("rank_sum", {}).items():
         for score, v in entry.items():

@@ -9,6 +9,9 @@ from cdam_core.cli.common import EXIT_CODES, CliError, check_io, warn
 EPILOG = """what is lost is counted, never hidden:
   skipped lines   text-log lines that cannot be parsed (bad hex, stray text, bad base64),
                   listed with their line numbers; reading goes on after each
+  skipped objects BLF objects or containers that fail their checks (header, size, zlib
+                  checksum), listed with their byte offsets and sizes; reading goes on at
+                  the next object
   excluded frames feedback frames with a NaN/Inf timestamp, out of time order (one frame
                   stamped in the future is excluded, not the frames after it), or alone
                   between two gaps
@@ -69,19 +72,27 @@ def run(args) -> int:
     m = ds.meta
     m["log"] = str(args.log)
     m["log_truncated"] = report["truncated"]
-    m["skipped_lines"] = {"count": report["skipped_lines"], "lines": report["skipped"]}
+    if Path(args.log).suffix.lower() == ".blf":
+        m["skipped_objects"] = {"count": report["skipped_objects"],
+                                "bytes": report["skipped_bytes"], "objects": report["skipped"]}
+    else:
+        m["skipped_lines"] = {"count": report["skipped_lines"], "lines": report["skipped"]}
     write_dataset(out, ds)
     print(f"{sum(rec.counts.values())} frames: {dict(rec.counts)}")
     print(f"malformed: {rec.malformed}")
     if report["truncated"]:
         warn("import-can", f"log ends in a partial record (cut line not read): "
                            f"{report['truncated']}")
-    skipped = report["skipped_lines"]
-    if skipped:
-        where = ", ".join(str(s["line"]) for s in report["skipped"])
-        more = "" if skipped <= len(report["skipped"]) else ", ..."
-        warn("import-can", f"skipped lines: {skipped} (line {where}{more}); first: "
-                           f"{report['skipped'][0]['reason']}")
+    skipped, bad_objects = report["skipped_lines"], report["skipped_objects"]
+    for count, what, key, size in ((skipped, "lines", "line", ""),
+                                   (bad_objects, "objects", "offset",
+                                    f", {report['skipped_bytes']} bytes")):
+        if count:
+            where = ", ".join(str(s[key]) for s in report["skipped"])
+            more = "" if count <= len(report["skipped"]) else ", ..."
+            unit = "line" if key == "line" else "byte"
+            warn("import-can", f"skipped {what}: {count}{size} ({unit} {where}{more}); "
+                               f"first: {report['skipped'][0]['reason']}")
     nonfinite = rec.malformed["non_finite_time"]
     if nonfinite:
         warn("import-can", f"excluded frames: {nonfinite} with a NaN/Inf timestamp")
@@ -98,8 +109,10 @@ def run(args) -> int:
     print(f"{len(ds)} samples at {args.rate:g} Hz in {len(m['gapless_rows'])} segment(s), "
           f"{ds.t[-1]:.3f} s; gaps > {args.gap:g} ms: {gaps}, gap samples left out: "
           f"{m['gap_samples']} -> {args.output}")
-    lost = skipped + nonfinite + n_excl + m["gap_samples"]
+    lost = skipped + bad_objects + nonfinite + n_excl + m["gap_samples"]
     if lost:
-        warn("import-can", f"incomplete: {skipped} skipped line(s), {nonfinite + n_excl} "
-                           f"excluded frame(s), {m['gap_samples']} gap sample(s)")
+        objects = f"{bad_objects} skipped object(s), " if bad_objects else ""
+        warn("import-can", f"incomplete: {skipped} skipped line(s), {objects}"
+                           f"{nonfinite + n_excl} excluded frame(s), {m['gap_samples']} gap "
+                           f"sample(s)")
     return 1 if lost else 0

@@ -1,13 +1,34 @@
-"""Entry point of the `cdam` command (``python -m cdam_core`` does the same)."""
+"""Entry point of the `cdam` command (``python -m cdam_core`` does the same).
+
+Ctrl-C at any time, the imports at start-up included, ends the command with one line
+(``cdam: error: interrupted``, or ``cdam COMMAND: ...`` once the command is known) and exit
+code 130: while this module is imported a SIGINT handler exits at once (put back afterwards, so
+importing the module changes nothing for a program that uses it); from then on ``main`` catches
+KeyboardInterrupt around everything it does (building the parser imports every command).
+"""
 from __future__ import annotations
 
-import argparse
-import importlib
-import importlib.util
-import os
+import signal
 import sys
 
-from cdam_core import __version__
+
+def _interrupted_at_start(signum, frame):
+    sys.stderr.write("cdam: error: interrupted\n")
+    raise SystemExit(130)
+
+
+try:        # only the main thread may set handlers; elsewhere nothing to do
+    _PREVIOUS = signal.signal(signal.SIGINT, _interrupted_at_start) \
+        if signal.getsignal(signal.SIGINT) is signal.default_int_handler else None
+except ValueError:
+    _PREVIOUS = None
+
+import argparse  # noqa: E402  (after the handler: a Ctrl-C while importing is one line)
+import importlib  # noqa: E402
+import importlib.util  # noqa: E402
+import os  # noqa: E402
+
+from cdam_core import __version__  # noqa: E402
 
 # Command modules in the order `cdam --help` lists them. A module that is not present yet
 # (a command still being built) is skipped; one that is present but fails to import is an error.
@@ -45,6 +66,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 from cdam_core.cli.common import EXIT_CODES, CdamParser, CliError  # noqa: E402  (re-exported)
+
+if _PREVIOUS is not None:
+    signal.signal(signal.SIGINT, _PREVIOUS)
 
 
 def _message(exc: BaseException) -> tuple[str, int]:
@@ -109,26 +133,29 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _main(argv: list[str] | None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    if not getattr(args, "func", None):
-        parser.print_help()
-        return 2
+    args = None
+
+    def name() -> str:             # the command once it is known
+        return f"cdam {args.command}" if getattr(args, "command", None) else "cdam"
     try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        if not getattr(args, "func", None):
+            parser.print_help()
+            return 2
         return int(args.func(args) or 0)
     except KeyboardInterrupt:
-        print(f"cdam {args.command}: error: interrupted", file=sys.stderr)
+        print(f"{name()}: error: interrupted", file=sys.stderr)
         return 130
     except (CliError, OSError, MemoryError, ValueError, ArithmeticError, KeyError, TypeError,
             UnicodeError, RecursionError) as exc:
         msg, code = _message(exc)
         msg = " ".join(str(msg).split())          # one line
-        print(f"cdam {args.command}: error: {msg}", file=sys.stderr)
+        print(f"{name()}: error: {msg}", file=sys.stderr)
         return code
     except Exception as exc:  # noqa: BLE001 - a bug; still one line, no traceback
         msg = " ".join(f"{type(exc).__name__}: {exc}".split())
-        print(f"cdam {args.command}: error: internal error ({msg}); please report it",
-              file=sys.stderr)
+        print(f"{name()}: error: internal error ({msg}); please report it", file=sys.stderr)
         return 4
 
 

@@ -61,6 +61,9 @@ def run(args) -> int:
         if col not in ds.columns:
             raise ValueError(f"--map: column {col!r} (for {name}) not in {args.data}; "
                              f"columns: {', '.join(ds.columns)}")
+    units = ds.units
+    model.check_units({name: (col, units.get(col)) for name, col in mapping.items()},
+                      str(args.data))
     signals = {name: ds.column(col) for name, col in mapping.items()}
     used = set(mapping.values())
     extra = {c: ds.column(c) for c in inputs if c not in used}
@@ -129,6 +132,9 @@ def _test(args, mapping: dict, inputs: list, sel) -> dict:
     for name, col in cols.items():
         if col not in ts.columns:
             raise ValueError(f"--test: column {col!r} (for {name}) not in {args.test}")
+    from cdam_core.models.greybox.registry import get_model
+    get_model(args.model).check_units({n: (c, ts.units.get(c)) for n, c in mapping.items()},
+                                      f"--test: {args.test}")
     test = {name: ts.column(col) for name, col in cols.items()}
     test["t"] = ts.t
     scores = protocol_scores(sel, test, args.n_init)

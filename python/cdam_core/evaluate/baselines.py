@@ -24,6 +24,7 @@ from cdam_core.evaluate.horizons import score_horizons
 from cdam_core.evaluate.kstep import horizon_steps
 from cdam_core.evaluate.scores import evaluate
 from cdam_core.models.arx import ArxModel
+from cdam_core.models.protocol import segment_bounds
 from cdam_core.preprocess import smooth_pair
 
 __all__ = ["persistence", "naive_and_arx", "select_arx", "ARX_GRID"]
@@ -51,8 +52,14 @@ def persistence(segments, names, rate: float, horizons=()) -> tuple[dict, dict]:
     return metrics, arrays
 
 
+def _smoothed(U, Y, bounds, passes):
+    """(U, Y) smoothed ``passes`` times, each segment on its own."""
+    parts = [smooth_pair(U[a:b], Y[a:b], passes) for a, b in bounds]
+    return np.vstack([u for u, _ in parts]), np.vstack([y for _, y in parts])
+
+
 def naive_and_arx(U, Y, records: dict, names, *, narx=None, smoothing_passes: int = 0,
-                  features: str = "raw") -> dict:
+                  features: str = "raw", segments=None, record_segments=None) -> dict:
     """The references ``cdam identify`` prints beside a model's scores on each record, with the
     model's preprocessing (records smoothed ``smoothing_passes`` times):
 
@@ -62,25 +69,40 @@ def naive_and_arx(U, Y, records: dict, names, *, narx=None, smoothing_passes: in
       model's NARX orders (a static map: y(t) = B u(t) + c, orders (0, 1, 0)) and ``features``,
       scored by :func:`~cdam_core.evaluate.scores.evaluate` like the model.
 
+    ``segments`` (training) and ``record_segments`` ({record: segments}) cut the records
+    (lengths or row ranges, as for ``Model.predict``): each segment is smoothed on its own, no
+    ARX regressor and no prediction (naive or ARX) crosses a seam, and each segment's first rows
+    (no earlier sample) are left out of the scores.
+
     Returns {"arx_orders": [na, nb, nk], record: {"naive": {mode: metrics}, "arx": {mode:
     metrics}}} with modes "one_step" and "free_run" (``arx`` is {"error": why} when its free
     run diverges).
     """
     orders = tuple(narx) if narx is not None else (0, 1, 0)
-    Us, Ys = smooth_pair(U, Y, smoothing_passes)
-    arx = ArxModel(orders, features=features).fit(Us, Ys)
+    bounds = segment_bounds(segments, len(U))
+    Us, Ys = _smoothed(U, Y, bounds, smoothing_passes)
+    arx = ArxModel(orders, features=features).fit(Us, Ys, segments=bounds)
     mean = Ys.mean(axis=0)
     out = {"arx_orders": list(orders)}
     for name, (Ur, Yr) in records.items():
-        _, Yp = smooth_pair(Ur, Yr, smoothing_passes)
+        seg = (record_segments or {}).get(name)
+        rb = segment_bounds(seg, len(Yr))
+        _, Yp = _smoothed(Ur, Yr, rb, smoothing_passes)
         if len(Yp) < 3:
             raise ValueError(f"records: {name} has fewer than 3 samples")
-        naive = {"one_step": output_metrics(Yp[1:], Yp[:-1], names),
+        later = np.zeros(len(Yp), bool)              # rows with an earlier row of their segment
+        for a, b in rb:
+            later[a + 1:b] = True
+        if not later.any():
+            raise ValueError(f"records: {name}: no segment has 2 samples")
+        prev = np.flatnonzero(later) - 1
+        naive = {"one_step": output_metrics(Yp[later], Yp[prev], names),
                  "free_run": output_metrics(Yp, np.broadcast_to(mean, Yp.shape), names)}
         for m in naive["free_run"].values():
             m["r"] = None                                  # a constant: no correlation
         try:
-            scores = evaluate(arx, Ur, Yr, names, smoothing_passes=smoothing_passes)
+            scores = evaluate(arx, Ur, Yr, names, smoothing_passes=smoothing_passes,
+                              segments=seg)
         except ValueError as exc:                  # a diverged free run: said, not scored
             scores = {"error": str(exc)}
         out[name] = {"naive": naive, "arx": scores}

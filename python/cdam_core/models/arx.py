@@ -115,10 +115,16 @@ class ArxModel(Model):
         R = np.vstack([arx_design(F[a:b], Y[a:b], self.orders) for a, b in parts])
         T = np.vstack([Y[a + self.t0:b] for a, b in parts])
         A = np.c_[R, np.ones(len(R))]
+        with np.errstate(over="ignore", invalid="ignore"):
+            G = A.T @ A        # products of the data: beyond float64 for values near 1e155
+        if not np.all(np.isfinite(G)) or not np.all(np.isfinite(A.T @ T)):
+            self.n_outputs_ = None                    # not fitted
+            raise ValueError("U, Y: values too large for a least-squares fit in float64 (their "
+                             "products overflow); scale the data")
         self.coef_, *_ = np.linalg.lstsq(A, T, rcond=None)
         dof = max(len(A) - A.shape[1], 1)
         sigma2 = np.sum((T - A @ self.coef_) ** 2, axis=0) / dof
-        cov = np.linalg.pinv(A.T @ A)
+        cov = np.linalg.pinv(G)
         self.coef_std_ = np.sqrt(np.outer(np.clip(np.diag(cov), 0, None), sigma2))
 
     # the input part (B f + c) for rows t0.. of a segment; HybridNarx adds its network here

@@ -18,6 +18,13 @@ dropped (``meta["dropped_columns"]``). Rows are never filled in or interpolated.
 
 **Segments**: a record's rows may be split into segments (``meta["segments"]``); a model never
 predicts across a seam (:mod:`cdam_core.models.protocol`, ``segments=``).
+
+**Declared gaps** (:func:`gap_cuts`): a producer that saw its source stop (``cdam merge``,
+``cdam import-can``, ``cdam import-ulog``, the real-data loaders) says so in the sidecar:
+``gapless_rows`` (row ranges without a gap) and/or ``gaps`` (time intervals ``{"start", "end"}``
+in the record's time, a list or an object of lists per source). Reading such a record leaves
+out the rows inside a gap (their values were interpolated over it, not measured) and cuts the
+record at every gap, so no regressor or prediction crosses one.
 """
 from __future__ import annotations
 
@@ -27,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["parse_column_map", "apply_column_map", "split_missing", "kept_segments",
-           "check_segments", "NAN_POLICIES"]
+           "check_segments", "gap_cuts", "NAN_POLICIES"]
 
 NAN_POLICIES = ("error", "split")
 
@@ -163,3 +170,73 @@ def check_segments(segments, n: int, where: str = "segments") -> list[tuple[int,
     if pos != n:
         raise ValueError(f"{where}: cover {pos} rows, the record has {n}")
     return out
+
+
+def _gap_intervals(gaps, where: str) -> list[tuple[float, float]]:
+    """(start, end) of every declared gap: a list of {"start", "end"} objects, or an object of
+    such lists (per source or column)."""
+    if isinstance(gaps, dict):
+        groups = list(gaps.items())
+    elif isinstance(gaps, list):
+        groups = [(None, gaps)]
+    else:
+        raise ValueError(f"{where}: sidecar field 'gaps': expected a list of {{start, end}} "
+                         f"objects or an object of such lists, got {type(gaps).__name__}")
+    out = []
+    for key, items in groups:
+        name = "gaps" if key is None else f"gaps.{key}"
+        if not isinstance(items, list):
+            raise ValueError(f"{where}: sidecar field {name!r}: expected a list, got "
+                             f"{type(items).__name__}")
+        for k, g in enumerate(items):
+            s = g.get("start") if isinstance(g, dict) else None
+            e = g.get("end") if isinstance(g, dict) else None
+            if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v)
+                       for v in (s, e)) or not e > s:
+                raise ValueError(f"{where}: sidecar field '{name}[{k}]': expected "
+                                 f"{{\"start\": s, \"end\": s}} with finite start < end, "
+                                 f"got {g!r}"[:300])
+            out.append((float(s), float(e)))
+    return out
+
+
+def gap_cuts(meta: dict, t: np.ndarray, where: str):
+    """The declared gaps of a record (module doc) on its times ``t`` (N,): (rows kept, bool
+    (N,); [start, stop) ranges, over the kept rows, of the pieces between seams, gaps and the
+    existing ``meta["segments"]``). ValueError naming the field when the sidecar's
+    ``gapless_rows`` or ``gaps`` is malformed."""
+    t = np.asarray(t, np.float64)
+    n = t.size
+    keep = np.ones(n, bool)
+    cut = np.zeros(n + 1, bool)
+    cut[0] = True
+    seg = meta.get("segments")
+    if seg:
+        for a, _ in check_segments(seg, n, f"{where}: sidecar field 'segments'"):
+            cut[a] = True
+    rows = meta.get("gapless_rows")
+    if rows is not None:
+        if not isinstance(rows, list):
+            raise ValueError(f"{where}: sidecar field 'gapless_rows': expected a list of "
+                             f"[start, stop] row ranges, got {type(rows).__name__}")
+        covered, pos = np.zeros(n, bool), 0
+        for k, r in enumerate(rows):
+            if not (isinstance(r, list) and len(r) == 2 and
+                    all(isinstance(v, int) and not isinstance(v, bool) for v in r)
+                    and pos <= r[0] < r[1] <= n):
+                raise ValueError(f"{where}: sidecar field 'gapless_rows[{k}]': expected "
+                                 f"[start, stop] rows in increasing order within 0..{n}, "
+                                 f"got {r!r}"[:300])
+            covered[r[0]:r[1]] = True
+            cut[r[0]] = True
+            pos = r[1]
+        keep &= covered
+    if meta.get("gaps") is not None:
+        for s, e in _gap_intervals(meta["gaps"], where):
+            keep &= ~((t > s) & (t < e))
+            j = int(np.searchsorted(t, e, side="left"))     # first row at or after the end
+            if 0 < j < n:
+                cut[j] = True
+    seams = np.flatnonzero(cut[:n])
+    bounds = list(zip(seams.tolist(), np.r_[seams[1:], n].tolist()))
+    return keep, kept_segments(keep, bounds)

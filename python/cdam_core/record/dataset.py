@@ -6,14 +6,17 @@ Format (issue "identification", section "The dataset format"):
   (seconds, strictly increasing); every cell a decimal number. Standard channel names
   for the aerial manipulator: inputs ``T, tau_phi, tau_theta, tau_psi, tau_m1, tau_m2``; outputs
   ``phi, theta, psi, X, Y, Z, q1, q2``; optional ``theta_m1, theta_m2`` (motor-side angle after
-  the gearbox, rad) and any other named columns. SI units (N, N m, rad, m). pandas' default
+  the gearbox, rad) and any other named columns. SI units (N, N m, rad, m; a declared unit of a
+  standard column is checked: :mod:`cdam_core.record.units`). pandas' default
   CSV (an unnamed index column first) and PlotJuggler's (``__time`` first) are read too.
 - ``FILE.parquet``: the same columns in Parquet (:mod:`cdam_core.record.parquet`); a pandas
   DataFrame in and out: ``Dataset.from_dataframe`` / ``Dataset.to_dataframe``.
 - ``FILE.json`` (optional, beside the table): metadata, e.g. ``rate`` (Hz), ``units`` (column ->
   unit), ``source``, ``model`` (declared model), ``inputs``/``outputs`` (default selection),
-  ``segments`` (row ranges a model never predicts across) and anything else a producer wants to
-  keep (gaps, clock offsets, interpolation per column).
+  ``segments`` (row ranges a model never predicts across), declared gaps (``gapless_rows``,
+  ``gaps``: rows inside a gap are left out on reading and the record is cut there; see
+  :mod:`cdam_core.record.columns`) and anything else a producer wants to keep (clock offsets,
+  interpolation per column).
 
 Missing values: an error by default (``nan="error"``), or the record cut into segments around
 them (``nan="split"``); a column map renames the record's columns for a model (``mapping=``,
@@ -31,14 +34,15 @@ import json
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable, Sequence
+from typing import Iterable, Sequence
 
 import numpy as np
 
 from cdam_core.base.jsonio import plain, write_text_atomic
 from cdam_core.record.columns import (NAN_POLICIES, apply_column_map, check_segments,
-                                      kept_segments, parse_column_map, split_missing)
+                                      gap_cuts, kept_segments, parse_column_map, split_missing)
 from cdam_core.record.parquet import frame_table, read_parquet_table, write_parquet_table
+from cdam_core.record.units import STANDARD_UNITS, check_standard_units
 
 __all__ = [
     "Dataset",
@@ -52,25 +56,6 @@ __all__ = [
 
 STANDARD_INPUTS = ("T", "tau_phi", "tau_theta", "tau_psi", "tau_m1", "tau_m2")
 STANDARD_OUTPUTS = ("phi", "theta", "psi", "X", "Y", "Z", "q1", "q2")
-STANDARD_UNITS = {
-    "t": "s",
-    "T": "N",
-    "tau_phi": "N m",
-    "tau_theta": "N m",
-    "tau_psi": "N m",
-    "tau_m1": "N m",
-    "tau_m2": "N m",
-    "phi": "rad",
-    "theta": "rad",
-    "psi": "rad",
-    "X": "m",
-    "Y": "m",
-    "Z": "m",
-    "q1": "rad",
-    "q2": "rad",
-    "theta_m1": "rad",
-    "theta_m2": "rad",
-}
 
 
 def sidecar_path(path: str | os.PathLike) -> Path:
@@ -136,6 +121,11 @@ class Dataset:
             raise ValueError(f"data: NaN or Inf at sample {r}, column {self.columns[c]!r}")
         if not isinstance(self.meta, dict):
             raise ValueError("meta: expected a dict")
+        units = self.meta.get("units")
+        if units is not None and not (isinstance(units, dict) and
+                                      all(isinstance(u, str) for u in units.values())):
+            raise ValueError("meta.units: expected a dict of column -> unit text")
+        check_standard_units(units or {}, self.columns, "meta")
         if self.meta.get("segments") is not None:
             check_segments(self.meta["segments"], t.size, "meta.segments")
         self.t = t
@@ -417,16 +407,30 @@ def _assemble(where: str, names: list[str], arr: np.ndarray, meta: dict, inputs,
     if bad.size:
         r = int(bad[0]) + 1
         raise ValueError(f"{where}: {row_name(r)}: t not strictly increasing "
-                         f"({t[r - 1]!r} -> {t[r]!r})")
+                         f"({float(t[r - 1])!r} -> {float(t[r])!r})")
     if side is not None:
         check_sidecar(meta, t, names, side)
-    columns, data = apply_column_map(names[1:], arr[:, 1:], mapping, where)
     meta = dict(meta)
+    if meta.get("gapless_rows") is not None or meta.get("gaps") is not None:
+        keep, segments = gap_cuts(meta, t, str(side or where))
+        if not keep.any():
+            raise ValueError(f"{where}: every row lies inside a declared gap")
+        arr, t = arr[keep], t[keep]
+        meta.pop("gapless_rows", None)      # row numbers before the gap rows were left out
+        meta.pop("segments", None)
+        if len(segments) > 1:
+            meta["segments"] = segments
+        if not keep.all():
+            meta["gap_rows_left_out"] = int((~keep).sum())
+    columns, data = apply_column_map(names[1:], arr[:, 1:], mapping, where)
     if mapping:
         units = dict(meta.get("units") or {})
-        meta["units"] = {**{k: v for k, v in units.items() if k in columns},
+        # a mapped name carries its source column's unit when the map does not scale it;
+        # a scaled one (a unit conversion) is in the unit the name stands for
+        meta["units"] = {**{k: v for k, v in units.items() if k in columns and k not in mapping},
                          **{n: units[c] for n, (c, f) in mapping.items() if c in units and f == 1}}
         meta["map"] = {n: c if f == 1 else f"{c}*{f!r}" for n, (c, f) in mapping.items()}
+    check_standard_units(meta.get("units") or {}, columns, str(side or where))
     if nan == "error":
         finite = np.isfinite(data)
         if not finite.all():

@@ -231,8 +231,8 @@ def merge_records(flight: Dataset, joints: Dataset, pair: tuple[str, str] | None
     Each column is resampled as its record's ``meta["interpolation"]`` says (default linear).
     A gap in either record (a step longer than GAP_PERIODS sampling periods) stays a gap: no
     merged sample falls inside it (``t`` jumps over it); ``meta["gapless_rows"]`` lists the row
-    ranges between gaps, ``meta["gaps"]`` the gaps and ``meta["gap_samples"]`` the samples
-    left out.
+    ranges between gaps (also ``meta["segments"]``, so no model predicts across a gap),
+    ``meta["gaps"]`` the gaps and ``meta["gap_samples"]`` the samples left out.
     """
     if not isinstance(flight, Dataset) or not isinstance(joints, Dataset):
         raise ValueError("flight, joints: expected Dataset objects")
@@ -290,4 +290,6 @@ def merge_records(flight: Dataset, joints: Dataset, pair: tuple[str, str] | None
         "gapless_rows": [list(r) for r in rows],
         "gap_samples": int(full - grid.size),
     }
+    if len(rows) > 1:                       # no model predicts across a gap
+        meta["segments"] = [list(r) for r in rows]
     return Dataset(t=grid, columns=cols, data=np.column_stack(data), meta=meta), est

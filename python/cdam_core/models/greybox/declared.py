@@ -15,6 +15,7 @@ import numpy as np
 from scipy import signal as sps
 
 from cdam_core.base.signals import as_signal, as_time, positive
+from cdam_core.record.units import STANDARD_UNITS, check_model_units, same_unit
 
 INF = float("inf")
 
@@ -130,6 +131,18 @@ class GreyBoxModel:
     max_steps = 5
     min_gain = 0.01   # smallest share of the residual SSE an effect must remove to be claimed
 
+    @property
+    def signal_units(self) -> dict[str, str]:
+        """The unit each signal must be in where the model's equations fix it: by default a
+        signal named like a standard column needs that column's unit (the flight models)."""
+        return {s: STANDARD_UNITS[s] for s in self.signals if s in STANDARD_UNITS}
+
+    def check_units(self, given: dict, where: str) -> None:
+        """``given`` {signal: (column, declared unit or None)}: ValueError naming a signal that
+        is a normalised command or in another unit than the model needs
+        (:func:`cdam_core.record.units.check_model_units`)."""
+        check_model_units(self.name, self.signal_units, given, where)
+
     def __init__(self, fixed: dict[str, float] | None = None):
         fixed = dict(fixed or {})
         for k, v in fixed.items():
@@ -207,6 +220,20 @@ class RigidAxis(GreyBoxModel):
     offset = {"tau": "offset"}
     defaults = {"tau": "tau", "q": "q"}
 
+    def check_units(self, given: dict, where: str) -> None:
+        """A linear axis (force in N, position in m) or a rotary one (N m, rad): either pair,
+        not a mix, and no normalised command."""
+        super().check_units(given, where)
+        (tc, tu), (qc, qu) = given.get("tau", (None, None)), given.get("q", (None, None))
+        if tu is None or qu is None:
+            return
+        for force, pos in (("N", "m"), ("N m", "rad")):
+            if same_unit(tu, force) and not same_unit(qu, pos):
+                raise ValueError(f"{where}: tau (column {tc}) is in {tu!r} and q (column "
+                                 f"{qc}) in {qu!r}; the rigid_axis model needs a force in N "
+                                 f"with a position in m, or a torque in N m with an angle in "
+                                 f"rad")
+
     def equations(self, s: dict) -> dict:
         one = np.ones_like(np.asarray(s["q_d"], dtype=float))
         return {"tau": (s["tau"], {"M": s["q_dd"], "Fv": s["q_d"], "offset": one})}
@@ -234,6 +261,7 @@ class FlexibleJoint(GreyBoxModel):
     offset = {}
     defaults = {"tau_m": "tau_m1", "theta_m": "theta_m1", "q": "q1"}
     cables = {"tau_l": ("tau_m", "defl", "defl_d", "Ks")}
+    signal_units = {"tau_m": "N m", "theta_m": "rad", "q": "rad"}   # a rotary joint
 
     def augment(self, s: dict) -> dict:
         s["defl"] = s["theta_m"] - s["q"]

@@ -168,7 +168,7 @@ class C610Recorder(can.Listener):
         ``i_J`` (A) and ``tau_J`` (N m); linear interpolation between frames at most
         ``gap_threshold`` s apart. A longer feedback gap stays a gap: no grid sample falls in
         it, ``t`` jumps over it (grid times stay on one k / rate lattice) and ``meta`` lists
-        the row ranges without a gap (``gapless_rows``), the gaps per joint (``gaps``) and the grid
+        the row ranges without a gap (``gapless_rows``, also ``segments``), the gaps per joint (``gaps``) and the grid
         samples left out (``gap_samples``). A frame with a gap on both sides has nothing to
         interpolate with and is excluded (``excluded``, with the out-of-order ones). Across a gap
         the rotor turns are estimated from the speeds at its ends, so ``theta`` of a later
@@ -232,6 +232,8 @@ class C610Recorder(can.Listener):
             "inputs": [c for c in order if c.startswith("tau_")],
             "outputs": [c for c in order if c.startswith("theta_")],
         }
+        if len(rows) > 1:                   # no model predicts across a gap
+            meta["segments"] = [list(rw) for rw in rows]
         return Dataset(t=grid - t0, columns=order, data=np.column_stack([out[c] for c in order]),
                        meta=meta)
 

@@ -5,13 +5,16 @@ Writing uses ``can.Logger`` (the writer is chosen by suffix: candump ``.log``, `
 least every ``flush_interval`` seconds (default 50 ms), so a logger killed with SIGKILL leaves a
 text log complete up to at most one flush interval before the kill (page cache survives a
 process kill; an ``fsync`` would only matter for a power loss). A kill may cut the last line:
-``iter_log`` reports it; a bad line elsewhere is counted, named by its number and skipped. BLF is a compressed container
-format: each flush closes a container (``BLFWriter`` keeps up to 128 KiB otherwise).
+``iter_log`` reports it; a bad line elsewhere is counted, named by its number and skipped. BLF is
+a compressed container format: each flush closes a container (``BLFWriter`` keeps up to 128 KiB
+otherwise); a bad object or container is counted, skipped and reading goes on at the next.
 """
 from __future__ import annotations
 
 import socket
+import struct
 import time
+import zlib
 from pathlib import Path
 from typing import Callable, Iterator
 
@@ -190,23 +193,184 @@ def _text_frames(path: Path, report: dict) -> Iterator[can.Message]:
             lines.push("")
 
 
-def _blf_frames(path: Path, report: dict) -> Iterator[can.Message]:
-    """Frames of a BLF file; a corrupt object ends the reading (a binary container has no lines
-    to resume at) and is reported as ``truncated``."""
-    reader = can.BLFReader(str(path))
-    try:
-        it = iter(reader)
+# BLF framing (python-can's can.io.blf, after Toby Lorenz' vector_blf): a file header, then
+# objects, each a 16-byte base header (b"LOBJ", header size, header version, object size, type)
+# and its body, padded to 4 bytes. The frames are objects inside LOG_CONTAINER objects (zlib,
+# whose checksum covers the container, or uncompressed); an object may continue from one
+# container into the next. A size field is what frames everything, so a bad one is found by the
+# checks below and reading resumes at the next b"LOBJ" signature.
+MAX_BLF_OBJECT = 1 << 20      # an inner object claiming more than 1 MiB has a corrupt size field
+_SCAN_CHUNK = 1 << 20
+
+
+class _TolerantBLF:
+    """Frames of a BLF file; a bad object or container is counted, skipped and reading goes on
+    at the next object (``report``: ``skipped_objects``, ``skipped_bytes``, ``skipped`` with
+    byte offsets; ``truncated`` when the file ends inside an object)."""
+
+    def __init__(self, path: Path, report: dict):
+        from can.io import blf
+        self.blf, self.report, self.path = blf, report, path
+        try:
+            self.reader = can.BLFReader(str(path))
+        except (blf.BLFParseError, struct.error) as exc:
+            raise ValueError(f"{path}: not a BLF file (file header: "
+                             f"{type(exc).__name__}: {exc or 'bad signature'})") from None
+        self.f = self.reader.file
+        self.size = path.stat().st_size
+        self.f.seek(0)
+        head = blf.FILE_HEADER_STRUCT.unpack(self.f.read(blf.FILE_HEADER_STRUCT.size))
+        if not blf.FILE_HEADER_STRUCT.size <= head[1] <= self.size:
+            self.reader.stop()
+            raise ValueError(f"{path}: not a BLF file (file header size {head[1]})")
+        self.f.seek(head[1])
+        self.tail = b""
+
+    def _bad(self, offset: int, reason: str, nbytes: int) -> None:
+        rep = self.report
+        rep["skipped_objects"] += 1
+        rep["skipped_bytes"] += int(nbytes)
+        if len(rep["skipped"]) < MAX_LISTED_LINES:
+            rep["skipped"].append({"offset": int(offset), "reason": reason[:200]})
+
+    def _next_container(self, start: int) -> int | None:
+        """File offset of the next plausible container header at or after ``start``."""
+        base = self.blf.OBJ_HEADER_BASE_STRUCT
+        pos = start
+        while pos < self.size:
+            self.f.seek(pos)
+            chunk = self.f.read(_SCAN_CHUNK + base.size)
+            k = chunk.find(b"LOBJ")
+            while k >= 0:
+                if k + base.size <= len(chunk):
+                    _, hsize, _, osize, typ = base.unpack_from(chunk, k)
+                    if typ == self.blf.LOG_CONTAINER and hsize >= base.size and \
+                            base.size + self.blf.LOG_CONTAINER_STRUCT.size <= osize <= \
+                            self.size - (pos + k):
+                        return pos + k
+                k = chunk.find(b"LOBJ", k + 1)
+            pos += _SCAN_CHUNK
+        return None
+
+    def _resume(self, at: int, reason: str) -> bool:
+        """Skip from ``at`` to the next container; False at the end of the file."""
+        nxt = self._next_container(at + 4)
+        self._bad(at, reason, (self.size if nxt is None else nxt) - at)
+        if self.tail:
+            self._bad(at, "object cut by the skipped bytes", len(self.tail))
+            self.tail = b""
+        if nxt is None:
+            return False
+        self.f.seek(nxt)
+        return True
+
+    def __iter__(self) -> Iterator[can.Message]:
+        blf, f = self.blf, self.f
+        base, cont = blf.OBJ_HEADER_BASE_STRUCT, blf.LOG_CONTAINER_STRUCT
         while True:
+            at = f.tell()
+            head = f.read(base.size)
+            if not head:
+                break
+            if len(head) < base.size:
+                self.report["truncated"] = f"byte {at}: partial object header"
+                break
+            sig, _, _, osize, typ = base.unpack(head)
+            if sig != b"LOBJ" or osize < base.size + (cont.size if typ == blf.LOG_CONTAINER
+                                                       else 0):
+                if self._resume(at, f"bad object header (signature {sig!r}, size {osize})"):
+                    continue
+                break
+            body = f.read(osize - base.size)
+            if len(body) < osize - base.size:
+                if self._next_container(at + 4) is None:     # the end: cut by a kill
+                    self.report["truncated"] = f"byte {at}: object of {osize} bytes cut at " \
+                                               f"{len(body) + base.size}"
+                    break
+                f.seek(at + base.size)
+                if self._resume(at, f"object size {osize} runs past the next object"):
+                    continue
+                break
+            f.read(osize % 4)                                 # padding
+            if typ != blf.LOG_CONTAINER:
+                continue
+            method, _ = cont.unpack_from(body)
+            payload = body[cont.size:]
             try:
-                msg = next(it)
-            except StopIteration:
+                if method == blf.NO_COMPRESSION:
+                    data = payload
+                elif method == blf.ZLIB_DEFLATE:
+                    z = zlib.decompressobj()
+                    data = z.decompress(payload)
+                    if not z.eof:
+                        raise zlib.error("compressed stream incomplete")
+                else:
+                    raise zlib.error(f"unknown compression method {method}")
+            except zlib.error as exc:
+                if self._resume(at, f"container: {exc}"):
+                    continue
+                break
+            yield from self._objects(self.tail + data, at)
+            if method == blf.ZLIB_DEFLATE and z.unused_data:  # its size ran into the next one
+                nxt = self._next_container(at + 4)
+                if nxt is not None and nxt < f.tell():
+                    self._bad(at, f"container size {osize} runs into the next container "
+                                  f"(its stream read whole; resumed there)", 0)
+                    f.seek(nxt)
+        if self.tail and not self.report["truncated"]:
+            self.report["truncated"] = f"the file ends inside an object ({len(self.tail)} bytes)"
+
+    def _objects(self, data: bytes, at: int) -> Iterator[can.Message]:
+        """The frames of one container's objects (after the previous container's tail); the
+        last, incomplete object becomes the tail."""
+        blf = self.blf
+        base = blf.OBJ_HEADER_BASE_STRUCT
+        pos, n = 0, len(data)
+        self.tail = b""
+        while pos < n:
+            j = data.find(b"LOBJ", pos, pos + 8)            # after up to 7 padding bytes
+            if j < 0:
+                if pos + 8 > n:
+                    self.tail = data[pos:]
+                    return
+                k = data.find(b"LOBJ", pos + 1)
+                self._bad(at, "container: no object where one should start",
+                          (n if k < 0 else k) - pos)
+                if k < 0:
+                    return
+                pos = k
+                continue
+            if j + base.size > n:
+                self.tail = data[j:]
                 return
-            except Exception as exc:  # noqa: BLE001 - partial last container after a kill
-                report["truncated"] = f"{type(exc).__name__}: {exc}"
+            _, hsize, hver, osize, _ = base.unpack_from(data, j)
+            ext = {1: blf.OBJ_HEADER_V1_STRUCT.size, 2: blf.OBJ_HEADER_V2_STRUCT.size}.get(hver)
+            if ext is None or hsize != base.size + ext or not \
+                    base.size + ext <= osize <= MAX_BLF_OBJECT:
+                k = data.find(b"LOBJ", j + 4)
+                self._bad(at, f"container: bad object header (version {hver}, header size "
+                              f"{hsize}, object size {osize})", (n if k < 0 else k) - j)
+                if k < 0:
+                    return
+                pos = k
+                continue
+            if j + osize > n:                               # continues in the next container
+                self.tail = data[j:]
                 return
-            yield msg
+            try:
+                yield from list(self.reader._parse_data(data[j:j + osize]))
+            except (struct.error, blf.BLFParseError, ValueError) as exc:
+                self._bad(at, f"container: bad object ({type(exc).__name__}: {exc})", osize)
+            pos = j + osize
+
+
+def _blf_frames(path: Path, report: dict) -> Iterator[can.Message]:
+    """Frames of a BLF file (:class:`_TolerantBLF`)."""
+    reader = _TolerantBLF(path, report)
+    try:
+        yield from reader
     finally:
-        reader.stop()
+        reader.reader.stop()
 
 
 def iter_log(path: str | Path, report: dict | None = None) -> Iterator[can.Message]:
@@ -215,12 +379,16 @@ def iter_log(path: str | Path, report: dict | None = None) -> Iterator[can.Messa
     Text logs (.log candump, .asc, .csv) are read line by line: a line that cannot be parsed
     (bad hex, a stray text line, bad base64) is counted and skipped, and reading goes on with
     the next one. The last line without its newline (a logger killed mid-write) is reported as
-    ``truncated`` instead. A BLF file stops at its first corrupt object (``truncated``). Lines
+    ``truncated`` instead. A BLF file is read object by object: a bad object, or a container
+    whose zlib stream fails its checksum, is counted and skipped, and reading goes on at the next
+    object (a skipped container's frames cannot be counted: its bytes are); an uncompressed
+    container has no checksum, so a damaged frame body inside one is read as it stands. Lines
     python-can's ASC reader ignores by design (comments, events) are not frames and not counted.
 
-    ``report`` (if given) receives ``skipped_lines`` (count), ``skipped`` (the first
-    MAX_LISTED_LINES as ``{"line": n, "reason": text}``, lines numbered from 1) and
-    ``truncated`` (the error text, else False).
+    ``report`` (if given) receives ``skipped_lines`` (count), ``skipped_objects`` and
+    ``skipped_bytes`` (BLF), ``skipped`` (the first MAX_LISTED_LINES as ``{"line": n,
+    "reason": text}``, lines numbered from 1, or ``{"offset": byte, "reason": text}`` for BLF)
+    and ``truncated`` (the error text, else False).
     """
     path = Path(path)
     if not path.is_file():
@@ -229,7 +397,7 @@ def iter_log(path: str | Path, report: dict | None = None) -> Iterator[can.Messa
         raise ValueError(f"path: log suffix must be one of {', '.join(LOG_SUFFIXES)}, "
                          f"got {path.name!r}")
     rep = report if report is not None else {}
-    rep.update(truncated=False, skipped_lines=0, skipped=[])
+    rep.update(truncated=False, skipped_lines=0, skipped_objects=0, skipped_bytes=0, skipped=[])
     if path.suffix.lower() == ".blf":
         yield from _blf_frames(path, rep)
     else:
