@@ -49,14 +49,6 @@ def _spec(folder, **kw):
     return load_spec(folder / "spec.json", base=folder)
 
 
-@pytest.fixture(scope="module")
-def client():
-    from dask.distributed import Client, LocalCluster
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                      dashboard_address=":0") as cluster, Client(cluster) as c:
-        yield c
-
-
 def _table(out):
     return pd.read_parquet(out / "results.parquet").drop(columns="seconds")
 
@@ -193,16 +185,18 @@ def test_cli_interrupt_is_exit_130_and_keeps_the_completed_rows(folder):
     _spec(folder, records=["recs/bad.csv", "recs/good0.csv"], algorithms=["iboa"], seeds=1,
           folds=1, options={**OPTIONS, "iterations": 1000000})
     p = subprocess.Popen([sys.executable, "-m", "cdam_core", "batch", "spec.json", "--out", "o",
-                          "--workers", "1", "--quiet"], cwd=folder, stdout=subprocess.PIPE,
+                          "--workers", "1"], cwd=folder, stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE, text=True, env=os.environ.copy())
     try:
-        time.sleep(8.0)                       # past the imports and the cluster's start
+        first = p.stderr.readline()           # the note: the cluster is up, tasks submitted
+        time.sleep(8.0)                       # the corrupt record's task is done by then
         p.send_signal(signal.SIGINT)
         err = p.communicate(timeout=60)[1]
     finally:
         if p.poll() is None:
             p.kill()
-    assert p.returncode == 130, err
+    assert p.returncode == 130, first + err
+    assert "2 task(s) on 1 worker(s)" in first
     assert err.strip().splitlines() == ["cdam batch: error: interrupted"]
     t = pd.read_parquet(folder / "o" / "results.parquet")
     assert list(t.status) == ["error", "cancelled"]
