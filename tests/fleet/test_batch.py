@@ -151,6 +151,17 @@ def test_derived_seeds_come_from_the_task_alone(folder):
     ({"command": "evaluate", "records": "recs/*.csv"}, "spec.model"),
     ({"command": "crossfold", "records": "recs/*.csv", "folds": ["loop"]}, "spec.folds"),
     ({"command": "identify", "records": "recs/*.csv", "extra": 1}, "extra"),
+    ({"command": "crossfold", "records": "recs/*.csv", "seeds": 3}, "spec.seeds"),
+    ({"command": "paper", "records": "recs/*.csv"}, "spec.records"),
+    ({"command": "paper", "sections": ["loop"]}, "spec.sections"),
+    ({"command": "paper", "sections": ["narx"], "options": {"narx": None}}, "spec.sections"),
+    ({"command": "paper", "options": {"rate": 300}}, "spec.options"),     # 300 Hz: not 1000/q
+    ({"command": "paper", "options": {"map": "x"}}, "spec.options.map"),
+    ({"command": "residual", "records": "recs/*.csv"}, "spec.options.model"),
+    ({"command": "residual", "records": "recs/*.csv",
+      "options": {"model": "rigid_axis", "alpha": 2}}, "spec.options.alpha"),
+    ({"command": "residual", "records": "recs/*.csv",
+      "options": {"model": "rigid_axis", "map": "tau=force"}}, "spec.options.map"),
 ])
 def test_bad_spec_names_the_field(folder, doc, field):
     with pytest.raises(ValueError, match=field.replace(".", r"\.")):
