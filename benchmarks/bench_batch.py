@@ -31,7 +31,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 _RSS = """
-import json, resource, sys
+import json, pickle, resource, sys
 from cdam_core.fleet.spec import load_spec
 from cdam_core.fleet.tasks import run_task
 import cdam_core.evaluate.scores, cdam_core.identify.pipelines, cdam_core.paper.runner
@@ -43,7 +43,8 @@ res = run_task(task)
 s = __import__("time").perf_counter() - t
 after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 print(json.dumps({"rss_after_imports_mb": before / 1024, "rss_peak_mb": after / 1024,
-                  "seconds": s, "status": res["row"]["status"]}))
+                  "seconds": s, "status": res["row"]["status"],
+                  "from_worker_bytes": len(pickle.dumps(res))}))
 """
 
 
@@ -66,7 +67,6 @@ def paper_spread() -> dict:
     """The 10-seed paper spec on paper: one task per section (iboa, seed 0) run here, each in a
     fresh process (its memory; the hybrid's includes its structure search, once a worker)."""
     from cdam_core.fleet.spec import load_spec
-    from cdam_core.fleet.tasks import run_task
     path = ROOT / "docs" / "examples" / "batch" / "paper_seeds.json"
     spec = load_spec(path)
     tasks = spec.tasks()
@@ -74,9 +74,7 @@ def paper_spread() -> dict:
            "records_bytes": 0, "sections": {}}
     for sec in spec.sections:
         i = next(t.index for t in tasks if t.section == sec)
-        mem = _worker_memory(path, ".", i)
-        back = run_task(tasks[i])
-        out["sections"][sec] = {**mem, "from_worker_bytes": len(pickle.dumps(back))}
+        out["sections"][sec] = _worker_memory(path, ".", i)
     per = [out["sections"][t.section]["seconds"] for t in tasks]
     out["mean_task_seconds"] = sum(per) / len(per)
     out["cpu_seconds"] = sum(per)

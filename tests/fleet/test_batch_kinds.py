@@ -136,7 +136,7 @@ def test_residual_batch_equals_cdam_residual(tmp_path, client):
     from cdam_core.cli.main import main
     from cdam_core.fleet.graph import run_batch
     (tmp_path / "r").mkdir()
-    _rigid_csv(tmp_path / "r" / "axis.csv", seed=2, Fc=1.5, duration=6.0)
+    _rigid_csv(tmp_path / "r" / "axis.csv", seed=2, Fc=1.5, duration=4.0)
     (tmp_path / "r" / "broken.csv").write_text("t,force,pos\n0,1,2\n0.01,x,2\n")
     assert main(["residual", str(tmp_path / "r" / "axis.csv"), "--model", "rigid_axis",
                  "--map", "tau=force,q=pos", "--json", str(tmp_path / "o.json"), "--save",
@@ -199,7 +199,9 @@ def test_a_window_of_tasks_on_the_cluster_and_nothing_left_after(tmp_path, clien
     from cdam_core.fleet.graph import run_batch
     (tmp_path / "r").mkdir()
     _rigid_csv(tmp_path / "r" / "short.csv", seed=1, duration=1.0)
-    _rigid_csv(tmp_path / "r" / "long_.csv", seed=1, duration=20.0)
+    t = np.arange(200_000) * 1e-3                        # 200 s at 1 kHz, written plainly
+    np.savetxt(tmp_path / "r" / "long_.csv", np.column_stack([t, np.sin(t), np.cos(t)]),
+               delimiter=",", header="t,force,pos", comments="", fmt="%.6g")
     opts = {"hidden": 2, "epochs": 2, "smoothing": 1, "narx": [1, 1, 1], "inputs": ["force"],
             "outputs": ["pos"]}
     spec = parse_spec({"command": "identify", "records": ["r/*.csv"], "algorithms": ["bp"],
