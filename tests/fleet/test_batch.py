@@ -181,11 +181,26 @@ def test_cli_bad_spec_is_one_line_exit_2(folder):
 def test_cli_local_cluster_runs_and_reports_the_failed_record(folder):
     _spec(folder, algorithms=["bp"], seeds=1, folds=1)
     r = subprocess.run([sys.executable, "-m", "cdam_core", "batch", "spec.json",
-                        "--out", "o", "--workers", "2", "--quiet"], cwd=folder,
+                        "--out", "o", "--workers", "2", "--quiet", "--json", "s.json",
+                        "--report", "rep"], cwd=folder,
                        capture_output=True, text=True, env=os.environ.copy(), timeout=300)
     assert r.returncode == 1, r.stderr          # done, but incomplete
+    assert r.stderr == ""                       # --quiet: no notes, no bar
     assert "2 of 3 task(s) done" in r.stdout and "bad.csv" in r.stdout
-    assert len(pd.read_parquet(folder / "o" / "results.parquet")) == 3
+    t = pd.read_parquet(folder / "o" / "results.parquet")
+    assert len(t) == 3
+    js = json.loads((folder / "s.json").read_text())
+    assert js["status"] == {"ok": 2, "error": 1, "cancelled": 0}
+    assert [f["task"] for f in js["summary"]["failed"]] == list(t.task[t.status == "error"])
+    groups = {Path(g["record"]).name: g for g in js["summary"]["groups"]}
+    assert groups["bad.csv"]["ok"] == 0 and groups["bad.csv"]["metrics"] == {}
+    ok = t[t.record.str.endswith("good0.csv")].iloc[0]
+    m = groups["good0.csv"]["metrics"]["test.free_run.y.r"]
+    assert (m["n"], m["mean"], m["std"], m["min"], m["max"]) == (
+        1, ok["test.free_run.y.r"], 0.0, ok["test.free_run.y.r"], ok["test.free_run.y.r"])
+    md = (folder / "rep" / "index.md").read_text()
+    assert "## Failed or cancelled tasks" in md and "non-numeric cell" in md
+    assert "(../o/results.parquet)" in md and (folder / "rep" / "index.html").is_file()
 
 
 def test_cli_interrupt_is_exit_130_and_keeps_the_completed_rows(folder):

@@ -94,9 +94,17 @@ def run(args) -> int:
             cluster = local_cluster(spec.command, args.workers)
             client = Client(cluster)
         try:
+            if args.scheduler and not client.scheduler_info()["workers"]:
+                note(args, f"no worker at {args.scheduler} yet: waiting up to 60 s for one "
+                           f"(the tasks wait for workers anyway)")
+                try:
+                    client.wait_for_workers(1, timeout=60)
+                except TimeoutError:
+                    pass
             workers = client.scheduler_info()["workers"].values()
             where = (f"{len(workers)} worker(s), {sum(w.get('nthreads', 1) for w in workers)} "
-                     f"thread(s), {'scheduler ' + args.scheduler if args.scheduler else 'LocalCluster'}")
+                     f"thread(s), "
+                     + (f"scheduler {args.scheduler}" if args.scheduler else "LocalCluster"))
             note(args, f"{len(tasks)} task(s) on {where}; dashboard: {client.dashboard_link}")
             rows = run_batch(spec, args.out, client, progress=show_progress(args))
         finally:

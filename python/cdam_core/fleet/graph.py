@@ -3,8 +3,9 @@ table and the models as the results arrive.
 
 Tasks are submitted as plain futures, one per task (no shared intermediate: each task reads
 its own record on its worker), keyed by the task's name, a bounded window of them at a time;
-the client receives only the result rows and the fitted models. Rows are written in task order whatever the order they finish in,
-so the table does not depend on the number of workers.
+the client receives only the result rows and the fitted models. Rows are written in task
+order whatever the order they finish in, so the table does not depend on the number of
+workers.
 
 Threads or processes (``WORKERS``): identify spends its time in the C++ core's optimiser and
 Levenberg-Marquardt loops, which release the GIL (``gil_scoped_release`` in
@@ -13,9 +14,10 @@ evaluate's and crossfold's k-step rollouts are numpy calls on small matrices in 
 that hold the GIL, so they get one single-threaded process per core; so do residual (scipy
 least squares and the blocked cross-validation, Python-heavy) and paper (its tasks evaluate
 every seed one-step, k-step and free run on two records, and the hybrid section searches its
-structure with numpy; one process also keeps its own simulated flights for its next tasks). Either way the answer is
-the serial one: the seeds come from the task, and the core's threaded sums are fixed-chunk
-(docs/DESIGN.md, "Same bits whatever the thread count").
+structure with numpy; one process also keeps its own simulated flights for its next tasks).
+Either way the answer is the serial one: the seeds come from the task, the core's threaded
+sums are fixed-chunk (docs/DESIGN.md, "Same bits whatever the thread count"), and numpy's
+BLAS runs on one thread in every task (``tasks.one_blas_thread``).
 
 Output folder: ``results.parquet`` and ``results.json`` (the spec, the task count, the
 aggregate of ``summary`` and one row per task: record, algorithm, seed, fold, section, model
@@ -95,7 +97,7 @@ def run_batch(spec: BatchSpec, out, client=None, *, progress: bool = False, stop
             on_row(row)
 
     live: dict = {}                   # Dask key -> (future, task) submitted, not yet taken
-    blas = one_blas_thread()          # tasks run here too (--serial, threads): tasks.one_blas_thread
+    blas = one_blas_thread()          # tasks run here too (--serial, threads)
     blas.__enter__()
     try:
         if client is None:
