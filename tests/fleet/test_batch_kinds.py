@@ -284,3 +284,34 @@ def test_local_cluster_workers_keep_glibc_malloc_defaults_and_one_blas_thread():
         env = c.run(lambda: {k: os.environ.get(k) for k in ("MALLOC_TRIM_THRESHOLD_",
                                                           "OPENBLAS_NUM_THREADS")})
     assert list(env.values()) == [{"MALLOC_TRIM_THRESHOLD_": None, "OPENBLAS_NUM_THREADS": "1"}]
+
+
+_FAULTS = """
+import resource, sys
+import numpy as np
+from cdam_core.fleet.tasks import worker_malloc
+done = worker_malloc() if sys.argv[1] == "fix" else None
+x = np.ones(1)
+before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+for _ in range(300):
+    x = np.ones(131072) * 2.0          # 1 MiB temporaries, as a rollout makes
+after = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+print(done, after - before)
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's malloc")
+def test_worker_malloc_undoes_the_frozen_mmap_threshold():
+    """With Dask's MALLOC_TRIM_THRESHOLD_=65536 each 1 MiB temporary is a fresh mmap: 256
+    page faults each; worker_malloc (run by every task) makes them reuse the heap."""
+    env = {**ENV, "MALLOC_TRIM_THRESHOLD_": "65536"}
+    env.pop("MALLOC_MMAP_THRESHOLD_", None)
+    got = {}
+    for mode in ("plain", "fix"):
+        r = subprocess.run([sys.executable, "-c", _FAULTS, mode], capture_output=True,
+                           text=True, env=env, timeout=120)
+        assert r.returncode == 0, r.stderr
+        got[mode] = r.stdout.split()
+    assert got["fix"][0] == "True"
+    assert int(got["plain"][1]) > 300 * 200         # a page fault per 4 KiB page, each time
+    assert int(got["fix"][1]) < 300 * 20
