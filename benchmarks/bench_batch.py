@@ -10,19 +10,20 @@ each other (on a shared 2-core machine the load average decides the ratio).
 
 On paper, how a spec spreads over N machines of C cores (``spread``): task count, mean
 per-task seconds, a worker's peak memory (one task run in a fresh process: its resident set
-after the imports, and the peak once the task ran), what is shipped to a worker (the pickled
-task: paths and options, never data) and back (the pickled row and model), the records' size
-on disk (what each worker reads), and the wall time if the tasks spread evenly,
-ceil(tasks / (N C)) x mean task seconds (no scheduling overhead counted: about 1 ms a task on
-Dask). The same for the paper's 10-seed spec (docs/examples/batch/paper_seeds.json: 90 tasks,
-nothing read: each worker simulates the flights), from one task of each section.
+after the imports, and the peak once the task ran), what is shipped to a worker (the task as
+Dask pickles it, cloudpickle: paths and options, never data) and back (the row and the
+model), the records' size on disk (what each worker reads), and the wall time if the tasks
+spread evenly, ceil(tasks / (N C)) x mean task seconds (no scheduling overhead counted: about
+1 ms a task on Dask). The same for the paper's 10-seed spec
+(docs/examples/batch/paper_seeds.json: 90 tasks, nothing read: each worker simulates the
+flights), from one task of each section.
 """
 from __future__ import annotations
 
 import json
 import math
 import os
-import pickle
+import cloudpickle
 import subprocess
 import sys
 import tempfile
@@ -31,7 +32,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 _RSS = """
-import json, pickle, resource, sys
+import json, resource, sys
+import cloudpickle
 from cdam_core.fleet.spec import load_spec
 from cdam_core.fleet.tasks import run_task
 import cdam_core.evaluate.scores, cdam_core.identify.pipelines, cdam_core.paper.runner
@@ -44,7 +46,7 @@ s = __import__("time").perf_counter() - t
 after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 print(json.dumps({"rss_after_imports_mb": before / 1024, "rss_peak_mb": after / 1024,
                   "seconds": s, "status": res["row"]["status"],
-                  "from_worker_bytes": len(pickle.dumps(res))}))
+                  "from_worker_bytes": len(cloudpickle.dumps(res))}))
 """
 
 
@@ -70,7 +72,7 @@ def paper_spread() -> dict:
     path = ROOT / "docs" / "examples" / "batch" / "paper_seeds.json"
     spec = load_spec(path)
     tasks = spec.tasks()
-    out = {"tasks": len(tasks), "to_worker_bytes": len(pickle.dumps(tasks[0])),
+    out = {"tasks": len(tasks), "to_worker_bytes": len(cloudpickle.dumps(tasks[0])),
            "records_bytes": 0, "sections": {}}
     for sec in spec.sections:
         i = next(t.index for t in tasks if t.section == sec)
@@ -124,9 +126,9 @@ def batch_scaling() -> dict:
         res["serial_seconds"] = time.perf_counter() - t
         ref = _table(d / "serial")
         res["per_task_seconds"] = sum(r["seconds"] for r in rows) / len(rows)
-        res["to_worker_bytes"] = len(pickle.dumps(tasks[0]))
+        res["to_worker_bytes"] = len(cloudpickle.dumps(tasks[0]))
         back = run_task(tasks[0])
-        res["from_worker_bytes"] = len(pickle.dumps(back))
+        res["from_worker_bytes"] = len(cloudpickle.dumps(back))
         res["records_bytes"] = sum(p.stat().st_size for p in (d / "recs").iterdir())
         res["worker_memory"] = _worker_memory(d / "spec.json", d, 0)
         res["spread_seconds"] = spread(len(tasks), res["per_task_seconds"])

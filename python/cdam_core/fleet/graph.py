@@ -22,8 +22,9 @@ BLAS runs on one thread in every task (``tasks.one_blas_thread``).
 Output folder: ``results.parquet`` and ``results.json`` (the spec, the task count, the
 aggregate of ``summary`` and one row per task: record, algorithm, seed, fold, section, model
 file, status, error, seconds, every metric) and
-``models/TASK.json`` (``cdam_core.models.file.save_model``). Cancelled or interrupted, the
-rows that completed are written and the others are listed with status "cancelled".
+``models/TASK.json`` (``cdam_core.models.file.save_model``, written by the worker and shipped
+back as text). Cancelled or interrupted, the rows that completed are written and the others
+are listed with status "cancelled".
 """
 from __future__ import annotations
 
@@ -32,13 +33,12 @@ import sys
 import uuid
 from pathlib import Path
 
-from cdam_core.base.jsonio import atomic_target, write_json_atomic
+from cdam_core.base.jsonio import atomic_target, write_json_atomic, write_text_atomic
 from cdam_core.fleet.spec import BatchSpec
 from cdam_core.fleet.summary import summarise_rows
 from cdam_core.fleet.tasks import one_blas_thread, run_task
 
-__all__ = ["run_batch", "local_cluster", "worker_environ", "write_table", "results_document",
-           "WORKERS"]
+__all__ = ["run_batch", "local_cluster", "write_table", "results_document", "WORKERS"]
 
 WORKERS = {"identify": "threads", "evaluate": "processes", "crossfold": "processes",
            "residual": "processes", "paper": "processes"}
@@ -49,29 +49,15 @@ FIRST = ("task", "command", "record", "algorithm", "seed_index", "seed", "fold",
 def local_cluster(command: str, n_workers: int | None = None):
     """An in-process ``LocalCluster`` sized to the machine: one single-threaded worker process
     per core, or (identify) one process with a thread per core (``WORKERS``)."""
-    import dask
     from dask.distributed import LocalCluster
     n = n_workers or os.cpu_count() or 1
     if WORKERS[command] == "threads":
         return LocalCluster(n_workers=1, threads_per_worker=n, processes=False,
                             dashboard_address=":0")
-    with dask.config.set({"distributed.nanny.pre-spawn-environ": worker_environ()}):
-        return LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                            dashboard_address=":0")
-
-
-def worker_environ() -> dict:
-    """The environment Dask's nanny gives a worker process, without MALLOC_TRIM_THRESHOLD_
-    (one BLAS thread kept). Dask sets it to 65536 to hand freed memory back to the system;
-    setting it also freezes glibc's mmap threshold at 128 KiB, so every numpy temporary larger
-    than that is a fresh mmap and its pages are faulted in again: the crossfold's k-step
-    rollouts then spent 6x the system time here (11.0 s against 1.7 s for the multisine fold,
-    1.5x the wall time). For `dask worker` started by hand, the README gives the same as an
-    environment variable."""
-    import dask
-    env = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}))
-    env.pop("MALLOC_TRIM_THRESHOLD_", None)
-    return env
+    # Dask's nanny sets MALLOC_TRIM_THRESHOLD_ in its workers (and in this process's
+    # environment): every task undoes its cost (tasks.worker_malloc)
+    return LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                        dashboard_address=":0")
 
 
 def _cancelled_row(task) -> dict:
@@ -150,7 +136,7 @@ def run_batch(spec: BatchSpec, out, client=None, *, progress: bool = False, stop
                     exc = fut.exception()
                     take(task, {"row": {**_cancelled_row(task), "status": "error",
                                         "error": f"{type(exc).__name__}: {exc}"},
-                                "model": None, "model_meta": None})
+                                "model_file": None})
                 fut.release()                     # its result leaves the worker's memory
                 if stop is not None and stop.is_set():
                     break
@@ -172,10 +158,9 @@ def run_batch(spec: BatchSpec, out, client=None, *, progress: bool = False, stop
 def _save(out: Path, task, result) -> dict:
     row = dict(result["row"])
     row["model"] = None
-    if result.get("model") is not None:
-        from cdam_core.models.file import save_model
+    if result.get("model_file") is not None:
         name = f"models/{task.key}.json"
-        save_model(out / name, result["model"], **result["model_meta"])
+        write_text_atomic(out / name, result["model_file"])
         row["model"] = name
     return row
 

@@ -99,25 +99,40 @@ def worker_malloc() -> bool:
 
 
 def run_task(task: Task) -> dict:
-    """{"row": {task fields, status, error, seconds, metrics...}, "model": Model | None,
-    "model_meta": save_model's keywords | None}. Runs with one BLAS thread (_pin_blas) and,
-    in a Dask worker, glibc's mmap threshold raised (worker_malloc)."""
+    """{"row": {task fields, status, error, seconds, metrics...}, "model_file": the text of
+    the fitted model's file (``models.file.save_model``, written here: the worker ships back
+    the file, never the model object) or None}. Runs with one BLAS thread (_pin_blas) and,
+    in a Dask worker, glibc's thresholds reset (worker_malloc)."""
     _pin_blas()
     worker_malloc()
     row = {"task": task.key, "command": task.command, "record": task.record,
            "algorithm": task.algorithm, "seed_index": task.seed_index, "seed": task.seed,
            "fold": None if task.fold is None else str(task.fold), "section": task.section}
     t0 = time.perf_counter()
-    model = meta = None
+    text = None
     try:
         metrics, model, meta = RUNNERS[task.command](task)
+        if model is not None:
+            text = _model_text(model, meta)
         row.update(status="ok", error=None)
         row.update(flatten(metrics))
     except Exception as exc:     # noqa: BLE001 - reported in the table; the others go on
         msg = " ".join(str(exc).split()) or type(exc).__name__
         row.update(status="error", error=f"{type(exc).__name__}: {msg}")
     row["seconds"] = time.perf_counter() - t0
-    return {"row": row, "model": model, "model_meta": meta}
+    return {"row": row, "model_file": text}
+
+
+def _model_text(model, meta: dict) -> str:
+    """The model file's text (save_model into a scratch folder, read back)."""
+    import tempfile
+    from pathlib import Path
+
+    from cdam_core.models.file import save_model
+    with tempfile.TemporaryDirectory(prefix="cdam-batch-") as d:
+        path = Path(d) / "model.json"
+        save_model(path, model, **meta)
+        return path.read_text(encoding="utf-8")
 
 
 def _read(task: Task, inputs, outputs):
