@@ -93,9 +93,10 @@ def _records(folder: Path):
 
 
 def _warm():
-    import cdam_core.evaluate.scores  # noqa: F401
-    import cdam_core.identify.pipelines  # noqa: F401
-    import cdam_core.record.stack  # noqa: F401
+    import importlib
+    for name in ("cdam_core.evaluate.scores", "cdam_core.identify.pipelines",
+                 "cdam_core.record.stack"):
+        importlib.import_module(name)
 
 
 def _table(out):
