@@ -49,14 +49,6 @@ def _spec(folder, **kw):
     return load_spec(folder / "spec.json", base=folder)
 
 
-@pytest.fixture(scope="module")
-def client():
-    from dask.distributed import Client, LocalCluster
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                      dashboard_address=":0") as cluster, Client(cluster) as c:
-        yield c
-
-
 def _table(out):
     return pd.read_parquet(out / "results.parquet").drop(columns="seconds")
 
@@ -159,6 +151,17 @@ def test_derived_seeds_come_from_the_task_alone(folder):
     ({"command": "evaluate", "records": "recs/*.csv"}, "spec.model"),
     ({"command": "crossfold", "records": "recs/*.csv", "folds": ["loop"]}, "spec.folds"),
     ({"command": "identify", "records": "recs/*.csv", "extra": 1}, "extra"),
+    ({"command": "crossfold", "records": "recs/*.csv", "seeds": 3}, "spec.seeds"),
+    ({"command": "paper", "records": "recs/*.csv"}, "spec.records"),
+    ({"command": "paper", "sections": ["loop"]}, "spec.sections"),
+    ({"command": "paper", "sections": ["narx"], "options": {"narx": None}}, "spec.sections"),
+    ({"command": "paper", "options": {"rate": 300}}, "spec.options"),     # 300 Hz: not 1000/q
+    ({"command": "paper", "options": {"map": "x"}}, "spec.options.map"),
+    ({"command": "residual", "records": "recs/*.csv"}, "spec.options.model"),
+    ({"command": "residual", "records": "recs/*.csv",
+      "options": {"model": "rigid_axis", "alpha": 2}}, "spec.options.alpha"),
+    ({"command": "residual", "records": "recs/*.csv",
+      "options": {"model": "rigid_axis", "map": "tau=force"}}, "spec.options.map"),
 ])
 def test_bad_spec_names_the_field(folder, doc, field):
     with pytest.raises(ValueError, match=field.replace(".", r"\.")):
@@ -178,11 +181,26 @@ def test_cli_bad_spec_is_one_line_exit_2(folder):
 def test_cli_local_cluster_runs_and_reports_the_failed_record(folder):
     _spec(folder, algorithms=["bp"], seeds=1, folds=1)
     r = subprocess.run([sys.executable, "-m", "cdam_core", "batch", "spec.json",
-                        "--out", "o", "--workers", "2", "--quiet"], cwd=folder,
+                        "--out", "o", "--workers", "2", "--quiet", "--json", "s.json",
+                        "--report", "rep"], cwd=folder,
                        capture_output=True, text=True, env=os.environ.copy(), timeout=300)
     assert r.returncode == 1, r.stderr          # done, but incomplete
+    assert r.stderr == ""                       # --quiet: no notes, no bar
     assert "2 of 3 task(s) done" in r.stdout and "bad.csv" in r.stdout
-    assert len(pd.read_parquet(folder / "o" / "results.parquet")) == 3
+    t = pd.read_parquet(folder / "o" / "results.parquet")
+    assert len(t) == 3
+    js = json.loads((folder / "s.json").read_text())
+    assert js["status"] == {"ok": 2, "error": 1, "cancelled": 0}
+    assert [f["task"] for f in js["summary"]["failed"]] == list(t.task[t.status == "error"])
+    groups = {Path(g["record"]).name: g for g in js["summary"]["groups"]}
+    assert groups["bad.csv"]["ok"] == 0 and groups["bad.csv"]["metrics"] == {}
+    ok = t[t.record.str.endswith("good0.csv")].iloc[0]
+    m = groups["good0.csv"]["metrics"]["test.free_run.y.r"]
+    assert (m["n"], m["mean"], m["std"], m["min"], m["max"]) == (
+        1, ok["test.free_run.y.r"], 0.0, ok["test.free_run.y.r"], ok["test.free_run.y.r"])
+    md = (folder / "rep" / "index.md").read_text()
+    assert "## Failed or cancelled tasks" in md and "non-numeric cell" in md
+    assert "(../o/results.parquet)" in md and (folder / "rep" / "index.html").is_file()
 
 
 def test_cli_interrupt_is_exit_130_and_keeps_the_completed_rows(folder):
@@ -193,16 +211,18 @@ def test_cli_interrupt_is_exit_130_and_keeps_the_completed_rows(folder):
     _spec(folder, records=["recs/bad.csv", "recs/good0.csv"], algorithms=["iboa"], seeds=1,
           folds=1, options={**OPTIONS, "iterations": 1000000})
     p = subprocess.Popen([sys.executable, "-m", "cdam_core", "batch", "spec.json", "--out", "o",
-                          "--workers", "1", "--quiet"], cwd=folder, stdout=subprocess.PIPE,
+                          "--workers", "1"], cwd=folder, stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE, text=True, env=os.environ.copy())
     try:
-        time.sleep(8.0)                       # past the imports and the cluster's start
+        first = p.stderr.readline()           # the note: the cluster is up, tasks submitted
+        time.sleep(8.0)                       # the corrupt record's task is done by then
         p.send_signal(signal.SIGINT)
         err = p.communicate(timeout=60)[1]
     finally:
         if p.poll() is None:
             p.kill()
-    assert p.returncode == 130, err
+    assert p.returncode == 130, first + err
+    assert "2 task(s) on 1 worker(s)" in first
     assert err.strip().splitlines() == ["cdam batch: error: interrupted"]
     t = pd.read_parquet(folder / "o" / "results.parquet")
     assert list(t.status) == ["error", "cancelled"]

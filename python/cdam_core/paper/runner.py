@@ -29,7 +29,8 @@ from cdam_core.evaluate.compare import compare, rank_sum, summarise
 from cdam_core.identify import IdentifyConfig
 from cdam_core.evaluate.kstep import horizon_steps, k_step_predict
 
-__all__ = ["PaperConfig", "run_section", "evaluate_segments", "HYBRID_NET", "HYBRID_SEARCH"]
+__all__ = ["PaperConfig", "run_section", "run_seed", "section_setup", "evaluate_segments",
+           "HYBRID_NET", "HYBRID_SEARCH"]
 
 # The hybrid's residual network: HybridNarx's own default size (identify/hybrid.py), not tuned.
 HYBRID_NET = {"hidden": 5, "iterations": 20, "lm_epochs": 30}
@@ -159,6 +160,45 @@ def _hybrid_structure(U, Y) -> dict:
                            for r, _, n, f in sel["table"]]}
 
 
+def section_setup(data, cfg: PaperConfig, narx, model="bp"):
+    """(identify config, structure) of one section: the hybrid's orders chosen on the training
+    record (``narx`` ignored, ``structure`` JSON-able), else ``narx`` as given (structure None).
+    Deterministic: ``cdam batch`` calls it on each worker and gets the serial section's."""
+    structure = None
+    if model == "hybrid":
+        U, Y = data.train_arrays()
+        structure = _hybrid_structure(U, Y)
+        narx = tuple(structure["narx"])
+    return cfg.identify_config(narx, model), structure
+
+
+def run_seed(data, cfg: PaperConfig, icfg, algo: str, seed: int, *, label="static",
+             model="bp"):
+    """One algorithm and seed of a section: identify on the training data, evaluate on test and
+    validation. Returns (run, fitted model, predictions): ``run`` is the JSON-able record of
+    :func:`run_section` (fitness, seconds, metrics per record, mode, output); ``predictions``
+    maps "label/record/mode/measured" and "label/record/mode/algo/seedS" to arrays. The one
+    code path of ``cdam paper`` and of ``cdam batch``'s paper tasks."""
+    U, Y = data.train_arrays()
+    names = data.outputs
+    one = compare([algo], U, Y, seeds=[seed], config=icfg, names=names)
+    run = one.result["algorithms"][algo]["runs"][0]
+    fitted = one.models[algo]
+    if model == "hybrid":
+        run["residual_weight"] = float(fitted.residual_weight_)
+        run["training_tail_free_run_r"] = {str(w): float(v) for w, v
+                                           in fitted.validation_r_.items()}
+    run["metrics"] = {}
+    preds = {}
+    for rec, segs in (("test", data.test), ("validation", data.validation)):
+        m, arr = evaluate_segments(fitted, segs, names, horizons=cfg.horizons, rate=data.rate)
+        run["metrics"][rec] = m
+        for mode, (Ym, Pm) in arr.items():
+            preds[f"{label}/{rec}/{mode}/measured"] = Ym
+            preds[f"{label}/{rec}/{mode}/{algo}/seed{seed}"] = Pm
+    return run, fitted, preds
+
+
 def run_section(data, cfg: PaperConfig, narx, *, bar=None, label="static", model="bp"):
     """Identify with every algorithm and seed; evaluate on test and validation.
 
@@ -168,38 +208,19 @@ def run_section(data, cfg: PaperConfig, narx, *, bar=None, label="static", model
     "label/record/mode/measured" and "label/record/mode/algo/seedS" to arrays; ``best_models``
     holds each algorithm's best-training-fitness model.
     """
-    U, Y = data.train_arrays()
     t_start = time.perf_counter()
-    structure = None
-    if model == "hybrid":
-        structure = _hybrid_structure(U, Y)
-        narx = tuple(structure["narx"])
-    icfg = cfg.identify_config(narx, model)
-    names = data.outputs
-    records = {"test": data.test, "validation": data.validation}
-    result = {"config": icfg.to_dict(), "outputs": list(names), "seeds": list(range(cfg.seeds)),
-              "model": model, "algorithms": {}}
+    icfg, structure = section_setup(data, cfg, narx, model)
+    narx = icfg.narx
+    result = {"config": icfg.to_dict(), "outputs": list(data.outputs),
+              "seeds": list(range(cfg.seeds)), "model": model, "algorithms": {}}
     if structure is not None:
         result["structure"] = structure
     preds, best = {}, {}
     for algo in cfg.algos:
         runs, top = [], None
         for seed in range(cfg.seeds):
-            one = compare([algo], U, Y, seeds=[seed], config=icfg, names=names)
-            run = one.result["algorithms"][algo]["runs"][0]
-            fitted = one.models[algo]
-            if model == "hybrid":
-                run["residual_weight"] = float(fitted.residual_weight_)
-                run["training_tail_free_run_r"] = {str(w): float(v) for w, v
-                                                   in fitted.validation_r_.items()}
-            run["metrics"] = {}
-            for rec, segs in records.items():
-                m, arr = evaluate_segments(fitted, segs, names, horizons=cfg.horizons,
-                                           rate=data.rate)
-                run["metrics"][rec] = m
-                for mode, (Ym, Pm) in arr.items():
-                    preds[f"{label}/{rec}/{mode}/measured"] = Ym
-                    preds[f"{label}/{rec}/{mode}/{algo}/seed{seed}"] = Pm
+            run, fitted, p = run_seed(data, cfg, icfg, algo, seed, label=label, model=model)
+            preds.update(p)
             runs.append(run)
             if top is None or run["fitness"] > top[0]:
                 top = (run["fitness"], fitted, seed)
