@@ -67,7 +67,10 @@ inline constexpr Scaling kScaling = make_scaling();
 inline void predict(const float* x, float* y) {
   float xn[kIn], yn[kOut];
   for (int k = 0; k < kIn; ++k)
-    xn[k] = (x[k] - kScaling.in_lo[k]) * kScaling.in_gain[k] + kScaling.in_off[k];
+    // a constant channel is 0 whatever x (a test the compiler resolves: kScaling is constexpr)
+    xn[k] = kScaling.in_gain[k] != 0.0f
+                ? (x[k] - kScaling.in_lo[k]) * kScaling.in_gain[k] + kScaling.in_off[k]
+                : 0.0f;
   infer_normalised(xn, yn);
   for (int k = 0; k < kOut; ++k) y[k] = yn[k] * kScaling.out_gain[k] + kScaling.out_off[k];
 }
