@@ -184,11 +184,16 @@ namespace kernel {
         b0 += y * w0; b1 += y * w1; b2 += y * w2; b3 += y * w3;                              \
       }                                                                                      \
       const v4d* acc[8] = {&a0, &a1, &a2, &a3, &b0, &b1, &b2, &b3};                          \
-      for (int q = 0; q < 4; ++q)                                                            \
-        for (int e = 0; e < 4; ++e) {                                                        \
-          G[r + e + (c0 + q) * ldg] += alpha * (*acc[q])[e];                                 \
-          G[r + 4 + e + (c0 + q) * ldg] += alpha * (*acc[4 + q])[e];                         \
-        }                                                                                    \
+      for (int q = 0; q < 4; ++q) {                                                          \
+        double* g = G + r + (c0 + q) * ldg;                                                  \
+        v4d g0, g1;                                                                          \
+        std::memcpy(&g0, g, sizeof g0);                                                      \
+        std::memcpy(&g1, g + 4, sizeof g1);                                                  \
+        g0 += alpha * *acc[q];                                                               \
+        g1 += alpha * *acc[4 + q];                                                           \
+        std::memcpy(g, &g0, sizeof g0);                                                      \
+        std::memcpy(g + 4, &g1, sizeof g1);                                                  \
+      }                                                                                      \
     }                                                                                        \
     for (; r + 4 <= R; r += 4) {                                                             \
       v4d a0 = {0, 0, 0, 0}, a1 = a0, a2 = a0, a3 = a0;                                      \
@@ -199,11 +204,13 @@ namespace kernel {
         a0 += x * wc[c0]; a1 += x * wc[c0 + 1]; a2 += x * wc[c0 + 2];                        \
         a3 += x * wc[c0 + 3];                                                                \
       }                                                                                      \
-      for (int e = 0; e < 4; ++e) {                                                          \
-        G[r + e + c0 * ldg] += alpha * a0[e];                                                \
-        G[r + e + (c0 + 1) * ldg] += alpha * a1[e];                                          \
-        G[r + e + (c0 + 2) * ldg] += alpha * a2[e];                                          \
-        G[r + e + (c0 + 3) * ldg] += alpha * a3[e];                                          \
+      const v4d* acc[4] = {&a0, &a1, &a2, &a3};                                              \
+      for (int q = 0; q < 4; ++q) {                                                          \
+        double* g = G + r + (c0 + q) * ldg;                                                  \
+        v4d g0;                                                                              \
+        std::memcpy(&g0, g, sizeof g0);                                                      \
+        g0 += alpha * *acc[q];                                                               \
+        std::memcpy(g, &g0, sizeof g0);                                                      \
       }                                                                                      \
     }                                                                                        \
     for (; r < R; ++r)                                                                       \
