@@ -41,8 +41,9 @@ def structured_macs(n: int, i: int, h: int) -> dict:
             "reduced": n * (hh_reduced + cross + out)}
 
 
-def jtj_structured(theta, X, T, h):
-    """(J'J (D, D), J'e (D,), sse) of the 6-20-8-style tanh network, J never formed."""
+def jtj_structured(theta, X, T, h, jtj=True):
+    """(J'J (D, D), J'e (D,), sse) of the 6-20-8-style tanh network, J never formed; with
+    jtj=False, (None, J'e, sse)."""
     n, i = X.shape
     m = T.shape[1]
     W1, b1, W2, b2 = _unpack(theta, i, h, m)
@@ -57,6 +58,12 @@ def jtj_structured(theta, X, T, h):
     At = np.empty((n, h + 1))
     At[:, :h] = A
     At[:, h] = 1.0
+    Xt = np.empty((n, i + 1))
+    Xt[:, :i] = X
+    Xt[:, i] = 1.0
+    Jte = np.concatenate([(Xt.T @ ((E @ W2) * dA)).ravel(), (At.T @ E).ravel()])
+    if not jtj:
+        return None, Jte, float(np.sum(E * E))
     D = ph + (h + 1) * m
     JtJ = np.empty((D, D))
     JtJ[:ph, :ph] = (Z.T @ Z) * np.tile(W2.T @ W2, (i + 1, i + 1))
@@ -64,10 +71,6 @@ def jtj_structured(theta, X, T, h):
     JtJ[:ph, ph:] = ho
     JtJ[ph:, :ph] = ho.T
     JtJ[ph:, ph:] = np.kron(At.T @ At, np.eye(m))
-    Xt = np.empty((n, i + 1))
-    Xt[:, :i] = X
-    Xt[:, i] = 1.0
-    Jte = np.concatenate([(Xt.T @ ((E @ W2) * dA)).ravel(), (At.T @ E).ravel()])
     return JtJ, Jte, float(np.sum(E * E))
 
 
@@ -98,7 +101,9 @@ def train_lm_structured(theta0, X, T, h, *, epochs, goal=0.0, mu=1e-3, mu_dec=0.
     hist = {"mse": [], "mu": [], "grad_norm": []}
     epoch = 0
     while True:
-        JtJ, Jte, _ = jtj_structured(theta, X, T, h)
+        # as the core: no J'J when a stop that does not read ||J'e|| ends the run
+        last = mse <= goal or epoch == epochs or mu >= mu_max
+        JtJ, Jte, _ = jtj_structured(theta, X, T, h, jtj=not last)
         gnorm = float(np.linalg.norm(Jte))
         hist["mse"].append(mse)
         hist["mu"].append(mu)

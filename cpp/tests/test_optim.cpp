@@ -4,6 +4,7 @@
 // from properties (monotone best curve, same seed same run, no heap in the iterations).
 #include <doctest/doctest.h>
 
+#include <Eigen/Cholesky>
 #include <Eigen/Core>
 #include <algorithm>
 #include <cmath>
@@ -217,6 +218,68 @@ TEST_CASE("syrk_lower equals Eigen's rank update on and below the diagonal") {
         for (Index c = 0; c < P; ++c) CHECK(K(P, c) == 1.0);  // padding row untouched
       }
     }
+}
+
+TEST_CASE("jtj_blocks: the blocks of [v; a; 1][v; a; 1]' that J'J reads, against Eigen") {
+  // v_l = z_l d with z = [x; 1] (so each block of v v' is symmetric), a, then a row of ones.
+  for (Index h : {3, 20})
+    for (Index nb : {1, 37, 256}) {
+      const Index i = 2, nz = i + 1, P = nz * h, rows = P + h + 1;
+      Rng rng(static_cast<std::uint32_t>(h * 1000 + nb));
+      Eigen::MatrixXd V(rows + 1, nb);   // leading dimension rows + 1
+      for (Index s = 0; s < nb; ++s) {
+        Eigen::VectorXd d(h), a(h);
+        for (Index j = 0; j < h; ++j) { d[j] = rng.uniform(0.0, 1.0); a[j] = rng.uniform(-1.0, 1.0); }
+        for (Index l = 0; l < nz; ++l)
+          V.col(s).segment(l * h, h) = (l < i ? rng.uniform(-2.0, 2.0) : 1.0) * d;
+        V.col(s).segment(P, h) = a;
+        V(P + h, s) = 1.0;
+        V(rows, s) = 99.0;   // beyond the rows: never read
+      }
+      const Eigen::MatrixXd full = V.topRows(rows) * V.topRows(rows).transpose();
+      for (KernelPath p : {KernelPath::Auto, KernelPath::Generic}) {
+        Eigen::MatrixXd K = Eigen::MatrixXd::Zero(rows, rows);
+        cdam::host::jtj_blocks(K.data(), rows, V.data(), rows + 1, h, nz, nb, p);
+        const auto near = [&](Index r, Index c) {
+          return K(r, c) == doctest::Approx(full(r, c)).epsilon(1e-13).scale(nb * 4.0);
+        };
+        for (Index l = 0; l < nz; ++l)         // S: the lower triangle of each block l >= l2
+          for (Index l2 = 0; l2 <= l; ++l2)
+            for (Index j2 = 0; j2 < h; ++j2)
+              for (Index j = j2; j < h; ++j) REQUIRE(near(l * h + j, l2 * h + j2));
+        for (Index r = P; r < rows; ++r)       // C (with the sums of v) and R (lower)
+          for (Index c = 0; c < rows; ++c)
+            if (c < P || c <= r) REQUIRE(near(r, c));
+        CHECK(K(rows - 1, rows - 1) == double(nb));
+      }
+    }
+}
+
+TEST_CASE("cholesky_lower / cholesky_solve solve an SPD system as Eigen's LLT does") {
+  for (Index n : {1, 5, 33, 70, 308}) {
+    Rng rng(static_cast<std::uint32_t>(n));
+    Eigen::MatrixXd B(n, n + 3);
+    for (Index k = 0; k < B.size(); ++k) B.data()[k] = rng.uniform(-1.0, 1.0);
+    const Eigen::MatrixXd A = B * B.transpose() + 1e-2 * Eigen::MatrixXd::Identity(n, n);
+    Eigen::VectorXd b(n);
+    for (Index k = 0; k < n; ++k) b[k] = rng.uniform(-1.0, 1.0);
+    const Eigen::VectorXd want = A.llt().solve(b);
+    for (KernelPath p : {KernelPath::Auto, KernelPath::Generic}) {
+      Eigen::MatrixXd L = A;
+      Eigen::VectorXd x = b;
+      REQUIRE(cdam::host::cholesky_lower(L.data(), n, n, p));
+      const Eigen::MatrixXd Lt = L.triangularView<Eigen::Lower>();
+      CHECK((Lt * Lt.transpose() - A).norm() <= 1e-12 * A.norm());
+      cdam::host::cholesky_solve(L.data(), n, n, x.data(), p);
+      CHECK((x - want).norm() <= 1e-9 * want.norm());
+      Eigen::MatrixXd bad = A;   // an indefinite matrix and a NaN are refused
+      bad(n - 1, n - 1) = -1.0 - bad.row(n - 1).squaredNorm();
+      CHECK_FALSE(cdam::host::cholesky_lower(bad.data(), n, n, p));
+      bad = A;
+      bad(0, 0) = std::nan("");
+      CHECK_FALSE(cdam::host::cholesky_lower(bad.data(), n, n, p));
+    }
+  }
 }
 
 TEST_CASE("target build: fixed-size IBOA-BP (4-8-2, 20 butterflies) allocates nothing") {

@@ -53,6 +53,36 @@ TEST_CASE("model runner: network equals a plain double forward pass within 1e-5"
   Eigen::internal::set_is_malloc_allowed(true);
 }
 
+TEST_CASE("packed network: tansig and logsig equal a plain double forward pass within 1e-5") {
+  // A 3-5-2 network with weights from a closed form, in the exported layout (MATLAB order).
+  constexpr int I = 3, H = 5, O = 2, D = I * H + H + H * O + O;
+  float theta[D];
+  for (int k = 0; k < D; ++k) theta[k] = float(0.9 * std::sin(1.7 * k + 0.3));
+  for (const bool logsig : {false, true}) {
+    const auto p = fw::pack_mlp<I, H, O>(theta, logsig);
+    CHECK(fw::packed_matches(p, theta, logsig));
+    for (int trial = 0; trial < 20; ++trial) {
+      float x[I], y[O];
+      for (int l = 0; l < I; ++l) x[l] = float(std::cos(0.61 * (trial * I + l)));
+      fw::forward_packed(p, x, y);
+      for (int k = 0; k < O; ++k) {
+        double s = theta[I * H + H + H * O + k];
+        for (int j = 0; j < H; ++j) {
+          double n = theta[I * H + j];
+          for (int l = 0; l < I; ++l) n += double(theta[l * H + j]) * x[l];
+          const double a = logsig ? 1.0 / (1.0 + std::exp(-n)) : std::tanh(n);
+          s += double(theta[I * H + H + j * O + k]) * a;
+        }
+        CHECK(std::fabs(y[k] - s) < 1e-5);
+      }
+    }
+  }
+  // One changed weight is seen by the run-time check.
+  auto p = fw::pack_mlp<I, H, O>(theta, false);
+  p.w[O + 2] += 1.0f;
+  CHECK_FALSE(fw::packed_matches(p, theta, false));
+}
+
 TEST_CASE("model runner: predict scales, runs and back-scales") {
   float x[fw::kIn], xn[fw::kIn], y[fw::kOut];
   for (int k = 0; k < fw::kIn; ++k) {
@@ -67,6 +97,7 @@ TEST_CASE("model runner: predict scales, runs and back-scales") {
     CHECK(std::fabs(y[k] - ((yn[k] + 1) * (hi - lo) / 2 + lo)) < 1e-4 * (1 + std::fabs(hi - lo)));
   }
   CHECK(fw::theta_fnv1a() == cdam_model::kThetaFnv1a);
+  CHECK(fw::check_packed());
 }
 
 TEST_CASE("controller: one cycle per pair of feedback frames, PID from the reference") {

@@ -45,7 +45,7 @@ std::uint32_t ticks_loop(bool infer, bool scaled) {
 int main() {
   const std::uint32_t fnv = fw::theta_fnv1a();
   sh::kv("theta_fnv1a", fnv, true);
-  if (fnv != cdam_model::kThetaFnv1a) return 2;
+  if (fnv != cdam_model::kThetaFnv1a || !fw::check_packed()) return 2;
   sh::kv("inputs", fw::kIn);
   sh::kv("hidden", fw::kHid);
   sh::kv("outputs", fw::kOut);

@@ -64,7 +64,8 @@ def test_equivalence_and_cost_on_1000_recorded_vectors(flight_model, built):
     print({k: v for k, v in res.items() if k != "outputs"})
     assert res["vectors"] == 1000
     assert res["max_abs_error"] <= 1e-5
-    assert 300 < res["instructions_per_inference"] <= 1500
+    # issue 23 item 6: <= 900 (the VLDM bound is 614: benchmarks/bench_firmware.py)
+    assert 300 < res["instructions_per_inference"] <= 900
     from cdam_core.firmware import sandbox
     if sandbox.available() is None:   # the run saw only the image and its work folder
         assert res["sandbox"].startswith("private root"), res["sandbox"]

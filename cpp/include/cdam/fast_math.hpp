@@ -20,23 +20,27 @@
 
 namespace cdam {
 
+// The coefficients, lowest power of x^2 first: tanh(x) ~ x P(x^2) / Q(x^2) for |x| <= kTanhClamp
+// (also read by the Cortex-M4F inference kernel, firmware_stubs/include/fw/packed_mlp.hpp).
+constexpr float kTanhClamp = 7.90531110763549805f;
+constexpr float kTanhP[7] = {4.89352455891786e-03f,  6.37261928875436e-04f,  1.48572235717979e-05f,
+                             5.12229709037114e-08f,  -8.60467152213735e-11f, 2.00018790482477e-13f,
+                             -2.76076847742355e-16f};
+constexpr float kTanhQ[4] = {4.89352518554385e-03f, 2.26843463243900e-03f, 1.18534705686654e-04f,
+                             1.19825839466702e-06f};
+
 inline float fast_tanh(float x) {
-  constexpr float kClamp = 7.90531110763549805f;
   const float x2 = x * x;
   // One test on x^2 instead of two on x (a Cortex-M4 has no float min/max, so each test is a
-  // compare, a flag transfer and a branch). The rational is exactly +-1.0f at +-kClamp, so the
-  // saturated branch returns what clamping x would give. NaN fails the test and stays NaN.
-  if (x2 > kClamp * kClamp) return x > 0.0f ? 1.0f : -1.0f;
-  float p = x2 * -2.76076847742355e-16f + 2.00018790482477e-13f;
-  p = x2 * p + -8.60467152213735e-11f;
-  p = x2 * p + 5.12229709037114e-08f;
-  p = x2 * p + 1.48572235717979e-05f;
-  p = x2 * p + 6.37261928875436e-04f;
-  p = x2 * p + 4.89352455891786e-03f;
+  // compare, a flag transfer and a branch). The rational is exactly +-1.0f at +-kTanhClamp, so
+  // the saturated branch returns what clamping x would give. NaN fails the test and stays NaN.
+  if (x2 > kTanhClamp * kTanhClamp) return x > 0.0f ? 1.0f : -1.0f;
+  float p = x2 * kTanhP[6] + kTanhP[5];
+  for (int k = 4; k >= 0; --k) p = x2 * p + kTanhP[k];
   p = x * p;
-  float q = x2 * 1.19825839466702e-06f + 1.18534705686654e-04f;
-  q = x2 * q + 2.26843463243900e-03f;
-  q = x2 * q + 4.89352518554385e-03f;
+  float q = x2 * kTanhQ[3] + kTanhQ[2];
+  q = x2 * q + kTanhQ[1];
+  q = x2 * q + kTanhQ[0];
   return p / q;
 }
 

@@ -4,7 +4,9 @@
 // exceptions; the policy owns every buffer.
 //
 // Per epoch (lm_train below):
-//   J'e and J'J at theta (policy.normal, which returns ||J'e||); record mse, mu, ||J'e||,
+//   J'e and J'J at theta (policy.normal, which returns ||J'e||; J'J is skipped when a stop
+//   test that does not read ||J'e|| already ends the run: the last epoch of a run computes
+//   only the gradient norm it records); record mse, mu, ||J'e||,
 //   validation mse; stop, in this order, on goal (mse <= goal), epochs (epoch == epochs),
 //   min_grad (||J'e|| <= min_grad), mu_max (mu >= mu_max), max_fail (validation failures >=
 //   max_fail, with a validation set), cancelled (the on_epoch hook returned false);
@@ -18,7 +20,8 @@
 // Policy (J'J accumulator and solver), D = dim():
 //   using Scalar;  Index dim() const;
 //   double train_mse(const Scalar* theta)    training MSE, sse / (N m)
-//   double normal(const Scalar* theta)       accumulates J'e and J'J at theta; returns ||J'e||
+//   double normal(const Scalar* theta, bool jtj)  accumulates J'e (and J'J when jtj) at theta;
+//                                            returns ||J'e||
 //   bool   solve(double mu)                  step() = (J'J + mu I)^-1 J'e; false if not SPD
 //   bool   validation() const;  double val_mse(const Scalar* theta)
 //   Scalar* step(); Scalar* trial(); Scalar* best()   D values each (best: with validation only)
@@ -109,7 +112,10 @@ Status lm_train(Policy& p, typename Policy::Scalar* theta, const LmOptions& opt,
     for (Index k = 0; k < D; ++k) best[k] = theta[k];
   LmResult r;
   for (int epoch = 0;; ++epoch) {
-    const double gnorm = p.normal(theta);
+    // The stops decided before the gradient: no J'J is needed when one of them holds.
+    const bool last = mse <= opt.goal || epoch == opt.epochs || mu >= opt.mu_max ||
+                      (val && fails >= opt.max_fail);
+    const double gnorm = p.normal(theta, !last);
     record(epoch, LmEpoch{mse, mu, gnorm, vmse});
     r.recorded = epoch + 1;
     if (!val) r.best_epoch = epoch;

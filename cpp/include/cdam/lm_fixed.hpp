@@ -43,8 +43,10 @@ class LmFixed {
   explicit LmFixed(const Net& net = Net()) : net_(net) {}
 
   // Sum of squared errors of theta on n samples (X: i x n, T: m x n, one sample per column),
-  // in double. With `normal`, also J'e (jte()) and the lower triangle of J'J (jtj()).
-  double evaluate(const Scalar* theta, const Scalar* X, const Scalar* T, Index n, bool normal) {
+  // in double. With `normal`, also J'e (jte()) and, with `with_jtj`, the lower triangle of J'J
+  // (jtj()).
+  double evaluate(const Scalar* theta, const Scalar* X, const Scalar* T, Index n, bool normal,
+                  bool with_jtj = true) {
     double sse = 0.0;
     if (normal) {
       jte_.setZero();
@@ -65,6 +67,7 @@ class LmFixed {
         Scalar g = 0;
         for (int k = 0; k < kM; ++k) g += J_(k, c) * e_[k];
         jte_[c] += g;
+        if (!with_jtj) continue;
         for (int r = c; r < kD; ++r) {
           Scalar v = 0;
           for (int k = 0; k < kM; ++k) v += J_(k, r) * J_(k, c);
@@ -101,8 +104,8 @@ class LmFixed {
   double train_mse(const Scalar* theta) {
     return evaluate(theta, X_, T_, n_, false) / (static_cast<double>(n_) * kM);
   }
-  double normal(const Scalar* theta) {
-    evaluate(theta, X_, T_, n_, true);
+  double normal(const Scalar* theta, bool with_jtj) {
+    evaluate(theta, X_, T_, n_, true, with_jtj);
     double g2 = 0.0;
     for (int c = 0; c < kD; ++c) g2 += static_cast<double>(jte_[c]) * static_cast<double>(jte_[c]);
     return std::sqrt(g2);

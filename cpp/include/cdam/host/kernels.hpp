@@ -2,8 +2,10 @@
 // host/bp_fitness.hpp, hence here and not under optim/): the sum of squared
 // errors ("sse") of one network over a range of samples (`sse_soa`), the hidden activation over
 // a buffer (`activate_inplace`), and the rank update G += V V' (`syrk_lower`, the J'J blocks of
-// normal_equations.hpp). The SSE loop is written as plain loops over samples that the compiler vectorises, in a
-// structure-of-arrays layout (each input and target channel contiguous over the samples).
+// normal_equations.hpp; `jtj_blocks`, the same tiles on the network's symmetric blocks), the
+// blocked Cholesky of LM's solve (`cholesky_lower`, `cholesky_solve`). The SSE loop is written
+// as plain loops over samples that the compiler vectorises, in a structure-of-arrays layout
+// (each input and target channel contiguous over the samples).
 //
 // Per block of B samples (B = 128 by default: the h x B hidden activations and the input and
 // target rows of a block stay in L1):
@@ -26,9 +28,10 @@
 //
 // On x86-64 with GCC or Clang the same body is also compiled for AVX2 + FMA and chosen at run
 // time when the CPU has them (`KernelPath::Auto`; `KernelPath::Generic` forces the SSE2 build):
-// 4 doubles per instruction instead of 2, and FMA. syrk_lower's generic build is slow (the
-// 8-accumulator tile spills with SSE2 registers): normal_equations.hpp only calls it on the
-// AVX2 path and keeps Eigen's rankUpdate otherwise.
+// 4 doubles per instruction instead of 2, and FMA. The tiles' generic build is slow (the
+// 8-accumulator tile spills with SSE2 registers): normal_equations.hpp and training.hpp only
+// call jtj_blocks and the Cholesky on the AVX2 path and keep Eigen's rankUpdate and LLT
+// otherwise.
 // Both paths give the same value to rounding (FMA contraction may change the last bits); one
 // machine always takes the same path, so a seed still gives the same run.
 // Measured (10,000 samples, 6-20-8, shared 2-core AMD EPYC, load 3-7): the SSE kernel 0.65-0.9
@@ -158,69 +161,156 @@ namespace kernel {
   }                                                                                          \
   return total + ((total4[0] + total4[1]) + (total4[2] + total4[3]));
 
-// G (leading dimension ldg) += V V^T on and below the diagonal (some entries just above it, in
-// the 4 x 4 diagonal tiles, are written too, with their correct values), V: P x nb column-major
-// with leading dimension ldv (one sample a column). Samples in slices of 32 (the slice of V
-// stays in L1); tiles of 8 rows x 4 columns kept in 8 vector registers.
-#define CDAM_SYRK_BODY                                                                       \
+// One slice of ns samples: G (leading dimension ldg) += X W^T, X: R rows, W: C rows, both
+// column-major with leading dimension ldv (one sample a column). lower: only the entries on and
+// below the diagonal (row >= column; some just above it, in the 4 x 4 diagonal tiles, are
+// written too, with their correct values when X = W); otherwise all R x C. Tiles of 8 rows x 4
+// columns kept in 8 vector registers. alpha: +1 or -1 (exact: the sums are those of alpha = 1).
+#define CDAM_TILES_BODY                                                                      \
   typedef double v4d __attribute__((vector_size(32)));                                       \
+  Index c0 = 0;                                                                              \
+  for (; c0 + 4 <= C; c0 += 4) {                                                             \
+    Index r = lower ? c0 : 0;                                                                \
+    for (; r + 8 <= R; r += 8) {                                                             \
+      v4d a0 = {0, 0, 0, 0}, a1 = a0, a2 = a0, a3 = a0, b0 = a0, b1 = a0, b2 = a0, b3 = a0;   \
+      for (Index s = 0; s < ns; ++s) {                                                       \
+        const double* xc = X + s * ldv;                                                      \
+        const double* wc = W + s * ldv;                                                      \
+        v4d x, y;                                                                            \
+        std::memcpy(&x, xc + r, sizeof x);                                                   \
+        std::memcpy(&y, xc + r + 4, sizeof y);                                               \
+        const double w0 = wc[c0], w1 = wc[c0 + 1], w2 = wc[c0 + 2], w3 = wc[c0 + 3];         \
+        a0 += x * w0; a1 += x * w1; a2 += x * w2; a3 += x * w3;                              \
+        b0 += y * w0; b1 += y * w1; b2 += y * w2; b3 += y * w3;                              \
+      }                                                                                      \
+      const v4d* acc[8] = {&a0, &a1, &a2, &a3, &b0, &b1, &b2, &b3};                          \
+      for (int q = 0; q < 4; ++q) {                                                          \
+        double* g = G + r + (c0 + q) * ldg;                                                  \
+        v4d g0, g1;                                                                          \
+        std::memcpy(&g0, g, sizeof g0);                                                      \
+        std::memcpy(&g1, g + 4, sizeof g1);                                                  \
+        g0 += alpha * *acc[q];                                                               \
+        g1 += alpha * *acc[4 + q];                                                           \
+        std::memcpy(g, &g0, sizeof g0);                                                      \
+        std::memcpy(g + 4, &g1, sizeof g1);                                                  \
+      }                                                                                      \
+    }                                                                                        \
+    for (; r + 4 <= R; r += 4) {                                                             \
+      v4d a0 = {0, 0, 0, 0}, a1 = a0, a2 = a0, a3 = a0;                                      \
+      for (Index s = 0; s < ns; ++s) {                                                       \
+        const double* wc = W + s * ldv;                                                      \
+        v4d x;                                                                               \
+        std::memcpy(&x, X + s * ldv + r, sizeof x);                                          \
+        a0 += x * wc[c0]; a1 += x * wc[c0 + 1]; a2 += x * wc[c0 + 2];                        \
+        a3 += x * wc[c0 + 3];                                                                \
+      }                                                                                      \
+      const v4d* acc[4] = {&a0, &a1, &a2, &a3};                                              \
+      for (int q = 0; q < 4; ++q) {                                                          \
+        double* g = G + r + (c0 + q) * ldg;                                                  \
+        v4d g0;                                                                              \
+        std::memcpy(&g0, g, sizeof g0);                                                      \
+        g0 += alpha * *acc[q];                                                               \
+        std::memcpy(g, &g0, sizeof g0);                                                      \
+      }                                                                                      \
+    }                                                                                        \
+    for (; r < R; ++r)                                                                       \
+      for (Index c = c0; c < c0 + 4; ++c) {                                                  \
+        double acc = 0.0;                                                                    \
+        for (Index s = 0; s < ns; ++s) acc += X[r + s * ldv] * W[c + s * ldv];               \
+        G[r + c * ldg] += alpha * acc;                                                       \
+      }                                                                                      \
+  }                                                                                          \
+  for (; c0 < C; ++c0)                                                                       \
+    for (Index r = lower ? c0 : 0; r < R; ++r) {                                             \
+      double acc = 0.0;                                                                      \
+      for (Index s = 0; s < ns; ++s) acc += X[r + s * ldv] * W[c0 + s * ldv];                \
+      G[r + c0 * ldg] += alpha * acc;                                                        \
+    }
+
+// G += alpha V V^T on and below the diagonal (see CDAM_TILES_BODY), V: P x nb column-major with
+// leading dimension ldv. Samples in slices of 32 (the slice of V stays in L1).
+#define CDAM_SYRK_BODY                                                                       \
+  for (Index s0 = 0; s0 < nb; s0 += 32) {                                                    \
+    const double* Vs = V + s0 * ldv;                                                         \
+    tiles(G, ldg, Vs, Vs, ldv, P, P, nb - s0 < 32 ? nb - s0 : 32, true, alpha);              \
+  }
+
+// The J'J sums of normal_equations.hpp with the network's symmetries (issue 23, item 2). V (rows
+// of one sample, column-major, leading dimension ldv, nb samples): nz = i + 1 blocks of h rows
+// v_l = z_l d (l h .. l h + h - 1), then a (h rows), then a row of ones; K (leading dimension
+// ldk) receives, per slice of 32 samples:
+//   for l >= l': the lower triangle of sum v_l v_l'^T: each such h x h block is symmetric
+//                (z_l z_l' d d^T), so its upper triangle is not computed;
+//   sum [a; 1] v_l^T in full ((h + 1) x h: the C blocks with the sums of v in the last row);
+//   the lower triangle of sum [a; 1] [a; 1]^T (R, with the sums of a and the sample count).
+// Multiply-adds per sample for 6-20-8: about 9,900 against 12,900 for the whole lower triangle
+// of [v; a] [v; a]^T; the row sums come with them.
+#define CDAM_JTJ_BODY                                                                        \
+  const Index P = nz * h;                                                                    \
   for (Index s0 = 0; s0 < nb; s0 += 32) {                                                    \
     const Index ns = nb - s0 < 32 ? nb - s0 : 32;                                            \
     const double* Vs = V + s0 * ldv;                                                         \
-    Index c0 = 0;                                                                            \
-    for (; c0 + 4 <= P; c0 += 4) {                                                           \
-      Index r = c0;                                                                          \
-      for (; r + 8 <= P; r += 8) {                                                           \
-        v4d a0 = {0, 0, 0, 0}, a1 = a0, a2 = a0, a3 = a0, b0 = a0, b1 = a0, b2 = a0, b3 = a0; \
-        for (Index s = 0; s < ns; ++s) {                                                     \
-          const double* col = Vs + s * ldv;                                                  \
-          v4d x, y;                                                                          \
-          std::memcpy(&x, col + r, sizeof x);                                                \
-          std::memcpy(&y, col + r + 4, sizeof y);                                            \
-          const double w0 = col[c0], w1 = col[c0 + 1], w2 = col[c0 + 2], w3 = col[c0 + 3];    \
-          a0 += x * w0; a1 += x * w1; a2 += x * w2; a3 += x * w3;                            \
-          b0 += y * w0; b1 += y * w1; b2 += y * w2; b3 += y * w3;                            \
-        }                                                                                    \
-        const v4d* acc[8] = {&a0, &a1, &a2, &a3, &b0, &b1, &b2, &b3};                        \
-        for (int q = 0; q < 4; ++q)                                                          \
-          for (int e = 0; e < 4; ++e) {                                                      \
-            G[r + e + (c0 + q) * ldg] += (*acc[q])[e];                                       \
-            G[r + 4 + e + (c0 + q) * ldg] += (*acc[4 + q])[e];                               \
-          }                                                                                  \
+    for (Index l = 0; l < nz; ++l)                                                           \
+      for (Index l2 = 0; l2 <= l; ++l2)                                                      \
+        tiles(K + l * h + l2 * h * ldk, ldk, Vs + l * h, Vs + l2 * h, ldv, h, h, ns, true, 1.0); \
+    for (Index l = 0; l < nz; ++l)                                                           \
+      tiles(K + P + l * h * ldk, ldk, Vs + P, Vs + l * h, ldv, h + 1, h, ns, false, 1.0);    \
+    tiles(K + P + P * ldk, ldk, Vs + P, Vs + P, ldv, h + 1, h + 1, ns, true, 1.0);           \
+  }
+
+// Cholesky factor of the symmetric n x n matrix A (lower triangle read, column-major, leading
+// dimension ld) in place: A = L L', L in the lower triangle (the strict upper triangle is
+// scratch). Right-looking, in panels of kCholPanel columns: the panel's diagonal block by
+// plain loops, the rows below it by a triangular solve (column updates the compiler
+// vectorises), the trailing matrix by syrk_lower with alpha = -1. Returns 0, or k + 1 when the
+// k-th pivot is not positive (or NaN): A is then not positive definite.
+#define CDAM_CHOL_BODY                                                                       \
+  for (Index k0 = 0; k0 < n; k0 += kCholPanel) {                                             \
+    const Index kb = n - k0 < kCholPanel ? n - k0 : kCholPanel, k1 = k0 + kb;                \
+    for (Index c = k0; c < k1; ++c) {                                                        \
+      double* col = A + c * ld;                                                              \
+      const double d = col[c];                                                               \
+      if (!(d > 0.0)) return c + 1;                                                          \
+      const double l = std::sqrt(d), inv = 1.0 / l;                                          \
+      col[c] = l;                                                                            \
+      for (Index r = c + 1; r < n; ++r) col[r] *= inv;                                       \
+      for (Index c2 = c + 1; c2 < k1; ++c2) {                                                \
+        double* col2 = A + c2 * ld;                                                          \
+        const double f = col[c2];                                                            \
+        for (Index r = c2; r < n; ++r) col2[r] -= col[r] * f;                                \
       }                                                                                      \
-      for (; r + 4 <= P; r += 4) {                                                           \
-        v4d a0 = {0, 0, 0, 0}, a1 = a0, a2 = a0, a3 = a0;                                    \
-        for (Index s = 0; s < ns; ++s) {                                                     \
-          const double* col = Vs + s * ldv;                                                  \
-          v4d x;                                                                             \
-          std::memcpy(&x, col + r, sizeof x);                                                \
-          a0 += x * col[c0]; a1 += x * col[c0 + 1]; a2 += x * col[c0 + 2];                   \
-          a3 += x * col[c0 + 3];                                                             \
-        }                                                                                    \
-        for (int e = 0; e < 4; ++e) {                                                        \
-          G[r + e + c0 * ldg] += a0[e];                                                      \
-          G[r + e + (c0 + 1) * ldg] += a1[e];                                                \
-          G[r + e + (c0 + 2) * ldg] += a2[e];                                                \
-          G[r + e + (c0 + 3) * ldg] += a3[e];                                                \
-        }                                                                                    \
-      }                                                                                      \
-      for (; r < P; ++r)                                                                     \
-        for (Index c = c0; c < c0 + 4; ++c) {                                                \
-          double acc = 0.0;                                                                  \
-          for (Index s = 0; s < ns; ++s) acc += Vs[r + s * ldv] * Vs[c + s * ldv];           \
-          G[r + c * ldg] += acc;                                                             \
-        }                                                                                    \
     }                                                                                        \
-    for (; c0 < P; ++c0)                                                                     \
-      for (Index r = c0; r < P; ++r) {                                                       \
-        double acc = 0.0;                                                                    \
-        for (Index s = 0; s < ns; ++s) acc += Vs[r + s * ldv] * Vs[c0 + s * ldv];            \
-        G[r + c0 * ldg] += acc;                                                              \
-      }                                                                                      \
+    if (k1 < n)                                                                              \
+      syrk_lower(A + k1 + k1 * ld, ld, A + k1 + k0 * ld, ld, n - k1, kb, -1.0);              \
+  }                                                                                          \
+  return 0;
+
+// Solves L L' x = b in place (b: n values) with the factor of CDAM_CHOL_BODY.
+#define CDAM_CHOL_SOLVE_BODY                                                                 \
+  for (Index c = 0; c < n; ++c) {                                                            \
+    const double* col = L + c * ld;                                                          \
+    const double y = b[c] / col[c];                                                          \
+    b[c] = y;                                                                                \
+    for (Index r = c + 1; r < n; ++r) b[r] -= col[r] * y;                                    \
+  }                                                                                          \
+  for (Index c = n - 1; c >= 0; --c) {                                                       \
+    const double* col = L + c * ld;                                                          \
+    double acc = 0.0;                                                                        \
+    for (Index r = c + 1; r < n; ++r) acc += col[r] * b[r];                                  \
+    b[c] = (b[c] - acc) / col[c];                                                            \
   }
 
 #define CDAM_SYRK_ARGS                                                                       \
-  double *__restrict G, Index ldg, const double *__restrict V, Index ldv, Index P, Index nb
+  double *__restrict G, Index ldg, const double *__restrict V, Index ldv, Index P, Index nb,  \
+      double alpha
+
+#define CDAM_TILES_ARGS                                                                      \
+  double *__restrict G, Index ldg, const double *__restrict X, const double *__restrict W,    \
+      Index ldv, Index R, Index C, Index ns, bool lower, double alpha
+
+#define CDAM_JTJ_ARGS                                                                        \
+  double *__restrict K, Index ldk, const double *__restrict V, Index ldv, Index h, Index nz,  \
+      Index nb
 
 #define CDAM_SSE_ARGS                                                                        \
   const double *__restrict W1, const double *__restrict b1, const double *__restrict W2,      \
@@ -228,10 +318,17 @@ namespace kernel {
       const double *__restrict X, const double *__restrict T, Index ld, Index n,              \
       double *__restrict a, Index B
 
+// Columns per panel of the blocked Cholesky (one syrk_lower slice of samples).
+constexpr Index kCholPanel = 32;
+
 namespace generic {
 inline void activate_block(double* __restrict v, Index n, bool tansig) { CDAM_ACT_BODY }
 inline double sse_block(CDAM_SSE_ARGS) { CDAM_SSE_BODY }
+inline void tiles(CDAM_TILES_ARGS) { CDAM_TILES_BODY }
 inline void syrk_lower(CDAM_SYRK_ARGS) { CDAM_SYRK_BODY }
+inline void jtj_blocks(CDAM_JTJ_ARGS) { CDAM_JTJ_BODY }
+inline Index cholesky_lower(double* A, Index ld, Index n) { CDAM_CHOL_BODY }
+inline void cholesky_solve(const double* L, Index ld, Index n, double* b) { CDAM_CHOL_SOLVE_BODY }
 }  // namespace generic
 
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__)) && !defined(__AVX2__)
@@ -242,7 +339,16 @@ __attribute__((target("avx2,fma"))) inline void activate_block(double* __restric
   CDAM_ACT_BODY
 }
 __attribute__((target("avx2,fma"))) inline double sse_block(CDAM_SSE_ARGS) { CDAM_SSE_BODY }
+__attribute__((target("avx2,fma"))) inline void tiles(CDAM_TILES_ARGS) { CDAM_TILES_BODY }
 __attribute__((target("avx2,fma"))) inline void syrk_lower(CDAM_SYRK_ARGS) { CDAM_SYRK_BODY }
+__attribute__((target("avx2,fma"))) inline void jtj_blocks(CDAM_JTJ_ARGS) { CDAM_JTJ_BODY }
+__attribute__((target("avx2,fma"))) inline Index cholesky_lower(double* A, Index ld, Index n) {
+  CDAM_CHOL_BODY
+}
+__attribute__((target("avx2,fma"))) inline void cholesky_solve(const double* L, Index ld, Index n,
+                                                               double* b) {
+  CDAM_CHOL_SOLVE_BODY
+}
 }  // namespace avx2
 inline bool cpu_has_avx2() {
   static const bool has = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
@@ -258,6 +364,12 @@ inline bool cpu_has_avx2() { return false; }
 #undef CDAM_SSE_ARGS
 #undef CDAM_SYRK_BODY
 #undef CDAM_SYRK_ARGS
+#undef CDAM_TILES_BODY
+#undef CDAM_TILES_ARGS
+#undef CDAM_JTJ_BODY
+#undef CDAM_JTJ_ARGS
+#undef CDAM_CHOL_BODY
+#undef CDAM_CHOL_SOLVE_BODY
 
 }  // namespace kernel
 
@@ -300,10 +412,42 @@ inline double sse_soa(const Mlp<double>& net, const double* theta, const double*
 inline void syrk_lower(double* G, Index ldg, const double* V, Index ldv, Index P, Index nb,
                        KernelPath p = KernelPath::Auto) {
 #if CDAM_HAVE_AVX2_CLONE
-  if (avx2_path(p)) return kernel::avx2::syrk_lower(G, ldg, V, ldv, P, nb);
+  if (avx2_path(p)) return kernel::avx2::syrk_lower(G, ldg, V, ldv, P, nb, 1.0);
 #endif
   (void)p;
-  kernel::generic::syrk_lower(G, ldg, V, ldv, P, nb);
+  kernel::generic::syrk_lower(G, ldg, V, ldv, P, nb, 1.0);
+}
+
+// The J'J sums with the network's symmetries (CDAM_JTJ_BODY): V has nz h + h + 1 rows (the
+// blocks v_l, a, a row of ones), K (leading dimension ldk, at least nz h + h + 1 square).
+inline void jtj_blocks(double* K, Index ldk, const double* V, Index ldv, Index h, Index nz,
+                       Index nb, KernelPath p = KernelPath::Auto) {
+#if CDAM_HAVE_AVX2_CLONE
+  if (avx2_path(p)) return kernel::avx2::jtj_blocks(K, ldk, V, ldv, h, nz, nb);
+#endif
+  (void)p;
+  kernel::generic::jtj_blocks(K, ldk, V, ldv, h, nz, nb);
+}
+
+// Cholesky factor in place (CDAM_CHOL_BODY): A (n x n, leading dimension ld, lower triangle
+// read) becomes L in its lower triangle; the strict upper triangle is overwritten with scratch.
+// Returns true when A is positive definite (every pivot > 0).
+inline bool cholesky_lower(double* A, Index ld, Index n, KernelPath p = KernelPath::Auto) {
+#if CDAM_HAVE_AVX2_CLONE
+  if (avx2_path(p)) return kernel::avx2::cholesky_lower(A, ld, n) == 0;
+#endif
+  (void)p;
+  return kernel::generic::cholesky_lower(A, ld, n) == 0;
+}
+
+// x = (L L')^-1 b in place, L from cholesky_lower.
+inline void cholesky_solve(const double* L, Index ld, Index n, double* b,
+                           KernelPath p = KernelPath::Auto) {
+#if CDAM_HAVE_AVX2_CLONE
+  if (avx2_path(p)) return kernel::avx2::cholesky_solve(L, ld, n, b);
+#endif
+  (void)p;
+  kernel::generic::cholesky_solve(L, ld, n, b);
 }
 
 }  // namespace cdam::host

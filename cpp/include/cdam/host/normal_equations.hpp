@@ -11,9 +11,14 @@
 // Per sample this costs about (h(i+1))^2 / 2 + (h+1) h (i+1) multiply-adds instead of the
 // m D^2 of forming J'J from J: for 6-20-8 about 12,700 against 759,000.
 //
-// On a CPU with AVX2 + FMA (double), S, C and R come from one fused rank update of the stacked
-// [v; a] (host/kernels.hpp syrk_lower, about three times Eigen's SSE2 rankUpdate);
+// S's block (l, l') is sum z_l z_l' d d', itself symmetric: only the lower triangle of every
+// block is needed. On a CPU with AVX2 + FMA (double), S (those triangles), C and R, with the
+// row sums of v and a, come from one pass over the stacked [v; a; 1] (host/kernels.hpp
+// jtj_blocks: about 9,900 multiply-adds a sample for 6-20-8 against 12,900 for the lower
+// triangle of [v; a][v; a]'; about three times Eigen's SSE2 rankUpdate before the reduction);
 // otherwise from Eigen's rankUpdate and product, as written above.
+// Mode 0 (the SSE alone: LM's trial and validation passes) in double is host/kernels.hpp's
+// sse_soa on blocks of 128 samples transposed on the fly.
 // The hidden activation (double) is the vectorised one of host/kernels.hpp (within 5e-16 of
 // std::tanh / the logistic function; about ten times faster than the scalar libm call).
 // Threads and determinism: the record is cut into chunks of whole blocks whose number
@@ -131,10 +136,10 @@ class NormalEquations {
     if (mode >= 1) assemble_gradient(s, *jte);
     if (mode == 2) {
       const Index P = s.C.cols(), h = net_.hidden();
-      if (s.fused) {  // S, C and R (top h rows) from the summed [v; a] [v; a]'
+      if (s.fused) {  // S (lower triangle of each h x h block), C and R from K (jtj_blocks)
         S_.template triangularView<Eigen::Lower>() = s.K.topLeftCorner(P, P);
-        s.C.topRows(h) = s.K.block(P, 0, h, P);
-        s.R.topLeftCorner(h, h).template triangularView<Eigen::Lower>() = s.K.block(P, P, h, h);
+        s.C = s.K.block(P, 0, h + 1, P);
+        s.R.template triangularView<Eigen::Lower>() = s.K.block(P, P, h + 1, h + 1);
       } else {
         S_.template triangularView<Eigen::Lower>() = s.S;
       }
@@ -159,13 +164,13 @@ class NormalEquations {
     return false;
   }
 
-  // The partial sums of one chunk: sse, the gradient blocks, and the J'J blocks (fused: the
-  // whole [v; a] [v; a]' in K, plus the rows h of R and C; otherwise S, R and C).
+  // The partial sums of one chunk: sse, the gradient blocks, and the J'J blocks (fused: S, C
+  // and R together in K, host::jtj_blocks; otherwise S, R and C).
   struct Slot {
     bool fused;
     double sse = 0.0;
     Mat gH, gO;                // h x (i+1), m x (h+1)
-    Mat S, R, C, K;            // h(i+1) sq (not fused), (h+1) sq, (h+1) x h(i+1), (h(i+2)) sq (fused)
+    Mat S, R, C, K;            // h(i+1) sq (not fused), (h+1) sq, (h+1) x h(i+1), h(i+2)+1 sq (fused)
 
     Slot(const Net& n_, bool fused_) : fused(fused_) {
       const Index i = n_.inputs(), h = n_.hidden(), m = n_.outputs(), P = h * (i + 1);
@@ -173,7 +178,7 @@ class NormalEquations {
       gO.resize(m, h + 1);
       R.resize(h + 1, h + 1);
       C.resize(h + 1, P);
-      if (fused) K.resize(P + h, P + h);
+      if (fused) K.resize(P + h + 1, P + h + 1);
       else S.resize(P, P);
     }
 
@@ -211,18 +216,41 @@ class NormalEquations {
     }
   };
 
+  // Samples per block of the SSE-only pass (mode 0, double): the kernel's L1-sized block.
+  static constexpr Index kSseBlock = 128;
+
   // One thread's block buffers and the slot of the chunk it computes.
   struct Scratch {
     const Net& net;
     Index i, h, m;
     Mat A, D, Y, E, G, V;      // h x B, h x B, m x B, m x B, h x B, (h(i+1) + h) x B
+    Mat Xs, Ts;                // kSseBlock x i, kSseBlock x m: one block, channel-contiguous
     bool fused;                // double on an AVX2 + FMA CPU: one SYRK gives S, C and R
     Slot part;
 
     Scratch(const Net& n_, Index B)
         : net(n_), i(n_.inputs()), h(n_.hidden()), m(n_.outputs()),
-          A(h, B), D(h, B), Y(m, B), E(m, B), G(h, B), V(h * (i + 1) + h, B),
-          fused(fused_path()), part(n_, fused) {}
+          A(h, std::max(B, kSseBlock)), D(h, B), Y(m, B), E(m, B), G(h, B),
+          V(h * (i + 1) + h + 1, B), Xs(kSseBlock, i), Ts(kSseBlock, m), fused(fused_path()),
+          part(n_, fused) {
+      V.row(h * (i + 2)).setOnes();   // jtj_blocks' row of ones (the row sums)
+    }
+
+    // Mode 0 in double: the SSE by host/kernels.hpp's sse_soa (vectorised forward pass, AVX2 +
+    // FMA when the CPU has them; about 0.4 against 0.7 ms for Eigen's products at 10,000 x
+    // 6-20-8), each block of kSseBlock samples transposed to the kernel's layout first.
+    double sse_kernel(const Scalar* theta, const ConstMap& X, const ConstMap& T, Index lo,
+                      Index hi) {
+      double sse = 0.0;
+      for (Index b0 = lo; b0 < hi; b0 += kSseBlock) {
+        const Index nb = std::min(kSseBlock, hi - b0);
+        Xs.topRows(nb) = X.middleCols(b0, nb).transpose();
+        Ts.topRows(nb) = T.middleCols(b0, nb).transpose();
+        sse += host::sse_soa(net, theta, Xs.data(), Ts.data(), kSseBlock, nb, A.data(),
+                             kSseBlock);
+      }
+      return sse;
+    }
 
     void forward(const Scalar* theta, const ConstMap& X, Index b0, Index nb) {
       auto a = A.leftCols(nb);
@@ -242,8 +270,14 @@ class NormalEquations {
     void run(const Scalar* theta, const ConstMap& X, const ConstMap& T, Index lo, Index hi,
              int mode, Slot& out) {
       out.clear(mode);
+      if constexpr (std::is_same<Scalar, double>::value) {
+        if (mode == 0) {
+          out.sse = sse_kernel(theta, X, T, lo, hi);
+          return;
+        }
+      }
       const Index P = h * (i + 1);
-      const Index B = A.cols();
+      const Index B = D.cols();   // A may be wider (the SSE pass's block)
       const Activation act = net.activation();
       for (Index b0 = lo; b0 < hi; b0 += B) {
         const Index nb = std::min(B, hi - b0);
@@ -271,14 +305,13 @@ class NormalEquations {
         if constexpr (std::is_same<Scalar, double>::value) {
           if (fused) {
             V.block(P, 0, h, nb) = a;
-            host::syrk_lower(out.K.data(), out.K.rows(), V.data(), V.rows(), P + h, nb);
+            host::jtj_blocks(out.K.data(), out.K.rows(), V.data(), V.rows(), h, i + 1, nb);
+            continue;
           }
         }
-        if (!fused) {
-          out.S.template selfadjointView<Eigen::Lower>().rankUpdate(v);
-          out.R.topLeftCorner(h, h).template selfadjointView<Eigen::Lower>().rankUpdate(a);
-          out.C.topRows(h).noalias() += a * v.transpose();
-        }
+        out.S.template selfadjointView<Eigen::Lower>().rankUpdate(v);
+        out.R.topLeftCorner(h, h).template selfadjointView<Eigen::Lower>().rankUpdate(a);
+        out.C.topRows(h).noalias() += a * v.transpose();
         out.R.row(h).head(h) += a.rowwise().sum().transpose();
         out.R(h, h) += Scalar(nb);
         out.C.row(h) += v.rowwise().sum().transpose();
@@ -298,12 +331,18 @@ class NormalEquations {
     jtj.resize(ph + po, ph + po);
     const auto W2 = net_.W2(theta);
     const Mat Q = W2.transpose() * W2;  // h x h
-    // hidden-hidden (lower triangle of S is valid)
-    for (Index c = 0; c < ph; ++c)
-      for (Index r = c; r < ph; ++r) {
-        const Scalar v = S_(r, c) * Q(r % h, c % h);
-        jtj(r, c) = v;
-        jtj(c, r) = v;
+    // hidden-hidden: S's block (l, l') (l >= l') is symmetric, and only the lower triangle of
+    // each block is read (jtj_blocks computes no more)
+    const Index nz = ph / h;
+    for (Index l2 = 0; l2 < nz; ++l2)
+      for (Index j2 = 0; j2 < h; ++j2) {
+        const Index c = l2 * h + j2;
+        for (Index l = l2; l < nz; ++l)
+          for (Index j = l == l2 ? j2 : 0; j < h; ++j) {
+            const Scalar v = S_(l * h + std::max(j, j2), l2 * h + std::min(j, j2)) * Q(j, j2);
+            jtj(l * h + j, c) = v;
+            jtj(c, l * h + j) = v;
+          }
       }
     // output-output
     jtj.bottomRightCorner(po, po).setZero();

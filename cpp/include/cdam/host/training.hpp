@@ -10,6 +10,7 @@
 #include <Eigen/Core>
 #include <cmath>
 #include <functional>
+#include <type_traits>
 #include <vector>
 
 #include "../levenberg_marquardt.hpp"
@@ -52,13 +53,23 @@ class LmDynamic {
   double train_mse(const Scalar* theta) {
     return ne_.evaluate(theta, X_, T_, nullptr, nullptr) / n_train_;
   }
-  double normal(const Scalar* theta) {
-    ne_.evaluate(theta, X_, T_, &jte_, &jtj_);
+  double normal(const Scalar* theta, bool with_jtj) {
+    ne_.evaluate(theta, X_, T_, &jte_, with_jtj ? &jtj_ : nullptr);
     return static_cast<double>(jte_.norm());
   }
   bool solve(double mu) {
     lhs_ = jtj_;
     lhs_.diagonal().array() += static_cast<Scalar>(mu);
+    if constexpr (std::is_same<Scalar, double>::value) {
+      // AVX2 + FMA (chosen at run time): the blocked Cholesky of host/kernels.hpp, about twice
+      // Eigen's LLT compiled for SSE2 (308 x 308: 0.36 against 0.74 ms); Eigen's otherwise.
+      if (host::avx2_path(host::KernelPath::Auto)) {
+        if (!host::cholesky_lower(lhs_.data(), D_, D_)) return false;
+        step_ = jte_;
+        host::cholesky_solve(lhs_.data(), D_, D_, step_.data());
+        return true;
+      }
+    }
     llt_.compute(lhs_);
     if (llt_.info() != Eigen::Success) return false;
     step_ = llt_.solve(jte_);
