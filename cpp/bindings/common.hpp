@@ -5,6 +5,7 @@
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 
+#include <atomic>
 #include <chrono>
 #include <climits>
 #include <cmath>
@@ -135,23 +136,58 @@ inline Index mlp_params_or_raise(long long i, long long h, long long m) {
 // handlers (PyErr_CheckSignals). When a handler raises (Ctrl-C: KeyboardInterrupt) it returns
 // false, the loop ends with Status::Cancelled, and raise_if_interrupted() (GIL held) re-raises
 // the handler's exception, which stays set on this thread meanwhile.
+//
+// A loop running in a thread other than the main one never sees Ctrl-C (Python runs signal
+// handlers in the main thread only). cancel_requested() is the process-wide request the main
+// thread sets (_core.cancel_native_loops(), e.g. by `cdam batch` on Ctrl-C before it shuts
+// its workers down): every hook then ends its loop without touching the GIL, and the call
+// raises RuntimeError (a worker's task fails like any other; a KeyboardInterrupt would wedge
+// it). So no worker thread is still inside native code, or waiting for the GIL, when the
+// interpreter finalizes (a thread that takes the GIL during finalization is ended by
+// pthread_exit, whose unwinding through the bindings' noexcept frames aborts the process).
+// A loop also ends if the interpreter is already finalizing.
+inline std::atomic<bool>& cancel_requested() {
+  static std::atomic<bool> flag{false};
+  return flag;
+}
+
+inline bool interpreter_finalizing() {
+#if PY_VERSION_HEX >= 0x030D0000
+  return Py_IsFinalizing() != 0;
+#else
+  return _Py_IsFinalizing() != 0;
+#endif
+}
+
 class SignalPoll {
  public:
   explicit SignalPoll(long long stride = 1) : stride_(stride < 1 ? 1 : stride) {}
   bool operator()() {
     if (interrupted_) return false;
+    if (cancel_requested().load(std::memory_order_relaxed)) {
+      interrupted_ = requested_ = true;
+      return false;
+    }
     if (++calls_ < stride_) return true;
     calls_ = 0;
     const auto now = std::chrono::steady_clock::now();
     if (now - last_ < std::chrono::milliseconds(20)) return true;
     last_ = now;
+    if (interpreter_finalizing()) {
+      interrupted_ = requested_ = true;
+      return false;
+    }
     py::gil_scoped_acquire gil;
     if (PyErr_CheckSignals() != 0) interrupted_ = true;
     return !interrupted_;
   }
   bool interrupted() const { return interrupted_; }
   void raise_if_interrupted() const {
-    if (interrupted_) throw py::error_already_set();
+    if (!interrupted_) return;
+    if (requested_ && !PyErr_Occurred())   // an ordinary exception: a task that failed
+      PyErr_SetString(PyExc_RuntimeError, "cancelled: the native loop was asked to stop "
+                      "(cancel_native_loops, or the interpreter is shutting down)");
+    throw py::error_already_set();
   }
   // A copyable hook for the core's by-value Poll parameters.
   auto hook() {
@@ -161,6 +197,7 @@ class SignalPoll {
  private:
   long long stride_, calls_ = 0;
   bool interrupted_ = false;
+  bool requested_ = false;   // ended by cancel_requested() or finalization, not by a handler
   std::chrono::steady_clock::time_point last_ = std::chrono::steady_clock::now();
 };
 

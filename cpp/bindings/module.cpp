@@ -1,6 +1,8 @@
 // The private extension cdam_core._core: a thin root; each domain registers its own functions.
 #include <pybind11/pybind11.h>
 
+#include "common.hpp"
+
 namespace py = pybind11;
 
 void register_preprocess(py::module_& m);
@@ -21,4 +23,10 @@ PYBIND11_MODULE(_core, m) {
   register_rng(m);
   register_sim(m);
   register_optim(m);
+  m.def("cancel_native_loops", [](bool cancel) {
+          cdam::bind::cancel_requested().store(cancel);
+        }, py::arg("cancel") = true,
+        "Ask every native loop running in any thread to stop at its next poll (they end "
+        "with RuntimeError: cancelled), or, with cancel=False, withdraw the request. For a program "
+        "that is shutting down worker threads (cdam batch on Ctrl-C).");
 }

@@ -84,3 +84,38 @@ def test_sigint_at_start_up_is_one_line_and_130(tmp_path, delay):
                                         ["cdam identify: error: interrupted"]), err
     if delay < 0.1:         # still importing: the command is not known yet
         assert err.strip() == "cdam: error: interrupted"
+
+
+def test_a_loop_in_a_worker_thread_stops_when_cancelled():
+    """A native loop in a thread other than the main one never sees Ctrl-C; the main thread's
+    request (_core.cancel_native_loops, what `cdam batch` does on Ctrl-C before shutting its
+    workers down) ends it within a poll period with an ordinary exception (a worker's task
+    fails like any other), and a later loop runs normally once the request is withdrawn."""
+    import threading
+    import time
+
+    import numpy as np
+
+    from cdam_core import _core
+    out = {}
+
+    def run():
+        t0 = time.perf_counter()
+        try:
+            _core.five_point_cubic_smooth(np.ones(10), 2**31 - 1)   # about a minute of work
+            out["result"] = "finished"
+        except BaseException as exc:   # noqa: BLE001 - the type is what is tested
+            out["result"] = type(exc).__name__
+        out["seconds"] = time.perf_counter() - t0
+
+    th = threading.Thread(target=run)
+    th.start()
+    time.sleep(0.5)
+    try:
+        _core.cancel_native_loops()
+        th.join(timeout=GRACE)
+    finally:
+        _core.cancel_native_loops(False)
+    assert not th.is_alive(), "the loop did not stop"
+    assert out["result"] == "RuntimeError" and out["seconds"] < 0.5 + GRACE, out
+    np.testing.assert_allclose(_core.five_point_cubic_smooth(np.arange(10.0), 1), np.arange(10.0))

@@ -5,6 +5,7 @@ import os
 import time
 from pathlib import Path
 
+from cdam_core import _core
 from cdam_core.cli.common import (CliError, CliIOError, add_outputs, check_io, note,
                                   show_progress, write_json)
 
@@ -107,6 +108,11 @@ def run(args) -> int:
                      + (f"scheduler {args.scheduler}" if args.scheduler else "LocalCluster"))
             note(args, f"{len(tasks)} task(s) on {where}; dashboard: {client.dashboard_link}")
             rows = run_batch(spec, args.out, client, progress=show_progress(args))
+        except KeyboardInterrupt:
+            # the rows that completed are written; worker threads still inside a native loop
+            # see no signal: ask them to stop before the cluster and the interpreter shut down
+            _core.cancel_native_loops()
+            raise
         finally:
             client.close()
             if cluster is not None:
