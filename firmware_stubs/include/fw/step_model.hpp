@@ -1,6 +1,7 @@
 // The dynamic model kinds on the target, one sample at a time: `arx`, `hybrid` (ARX + a static
-// network on its residual) and `greybox` (a declared model plus the effects the residual loop
-// found, integrated as cdam_core.models.greybox.augmented.GreyBox does). The numbers come from
+// network on its residual), `greybox` (a declared model plus the effects the residual loop
+// found, integrated as cdam_core.models.greybox.augmented.GreyBox does) and `quad_physics` (the
+// flight model's rigid body, RK4 per sample: fw/quad_physics_step.hpp). The numbers come from
 // generated/model.hpp (`cdam export-firmware`); the structure (which effect, which declared
 // model) is an integer code there, never a name. Fixed sizes, no heap; libm only for tanhf (a
 // smoothed Coulomb friction) and sinf (the flexible joint's gravity and payload terms).
@@ -15,6 +16,7 @@
 // with -ffp-contract=off so that no multiply-add is fused), so the firmware differs from Python
 // by float32 rounding only.
 #pragma once
+#define CDAM_FW_STEP_MODEL_HPP
 #include <cstdint>
 
 #include "model.hpp"
@@ -407,3 +409,7 @@ inline std::uint32_t params_fnv1a() {
 #endif
 
 }  // namespace fw
+
+#if CDAM_MODEL_KIND == 4
+#include "fw/quad_physics_step.hpp"   // the quad_physics flight model: RK4 on 13 states
+#endif

@@ -20,7 +20,7 @@ import numpy as np
 
 from cdam_core.firmware.numbers import c_array, c_float, c_int_array, finite32, theta_fnv1a
 
-KIND_CODES = {"bp_network": 0, "arx": 1, "hybrid": 2, "greybox": 3}
+KIND_CODES = {"bp_network": 0, "arx": 1, "hybrid": 2, "greybox": 3, "quad_physics": 4}
 DECLARED_CODES = {"rigid_axis": 0, "flexible_joint": 1, "quadrotor": 2}
 EFFECT_CODES = {"coulomb_friction": 1, "asymmetric_friction": 2, "external_force": 3,
                 "actuator_delay": 4, "backlash": 5, "hardening_stiffness": 6, "payload_mass": 7,
@@ -83,6 +83,10 @@ class StepFirmwareModel:
             feats = "physics" if i["kPhysics"] else "raw"
             return (f"{self.kind} ({i['kNa']}, {i['kNb']}, {i['kNk']}) on {feats} features, "
                     f"{self.n_inputs} in, {self.n_outputs} out{net}")
+        if self.kind == "quad_physics":
+            return (f"quad_physics, 13 states, rates {'dynamic' if i['kRatesDynamic'] else 'held'}"
+                    f", {i['kKernel']}-tap actuation lag, delays {i['kDelayTrans']}/"
+                    f"{i['kDelayRot']} samples, one RK4 step per sample")
         return (f"greybox, {self.model.declared}, {i['kEffects']} effect(s), "
                 f"{i['kSubsteps']} substep(s) per sample")
 
@@ -114,6 +118,8 @@ def step_model(mf, source: str = "") -> StepFirmwareModel:
         fm = _arx(mf)
     elif mf.kind == "greybox":
         fm = _greybox(mf)
+    elif mf.kind == "quad_physics":
+        fm = _quad_physics(mf)
     else:
         raise ValueError(f"MODEL: a {mf.kind!r} model cannot run on the firmware")
     fm.source = str(source)
@@ -260,4 +266,26 @@ def _greybox(mf) -> StepFirmwareModel:
     fm.int_arrays = {"kEffectCode": codes or [0], "kEffectEq": eqs or [0],
                      "kEffectVel": vels or [0], "kEffectIndex": index or [0],
                      "kEffectLag": lag or [0]}
+    return fm
+
+
+
+def _quad_physics(mf) -> StepFirmwareModel:
+    """The quad_physics flight model (fw/quad_physics_step.hpp): its translational and
+    rotational parameters, the lag kernel's weights, delays, g, dt and two switches."""
+    m = mf.model
+    kernel = np.asarray(m._kernel(), np.float64)   # at most 500 taps (lag <= 100 dt)
+    dT, dR = (int(d) for d in m.delays_)
+    dt = float(m.dt)
+    fm = StepFirmwareModel(
+        "quad_physics", m, list(mf.inputs), list(mf.outputs), int(m.t0), mf.sha256,
+        ints={"kKind": KIND_CODES["quad_physics"], "kInputs": 4, "kOutputs": 13,
+              "kHistory": int(m.t0), "kKernel": int(kernel.size), "kDelayTrans": dT,
+              "kDelayRot": dR, "kReaction": bool(m.reaction),
+              "kRatesDynamic": m.rates == "dynamic"},
+        floats={"kDt": dt, "kDt6": dt / 6.0, "kGravity": float(m.gravity)},
+        macros={"CDAM_MODEL_KIND": KIND_CODES["quad_physics"]},
+        hashed=("kTrans", "kRot", "kKernelW"))
+    fm.arrays = {"kTrans": np.asarray(m.trans_, np.float64),
+                 "kRot": np.asarray(m.rot_, np.float64), "kKernelW": kernel}
     return fm

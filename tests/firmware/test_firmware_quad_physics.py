@@ -1,0 +1,147 @@
+"""The quad_physics flight model on the firmware: export (numbers only, no toolchain needed) and
+the run on the emulated STM32F405 against the Python model (QEMU, skipped without the
+toolchain).
+
+The model is fitted on a short flight of the independent numpy generator
+(tests/models/quad_generator.py: rotation-matrix attitude, Euler's equation, RK4 sub-steps, a
+first-order rotor lag of 30 ms) with the lag, rate damping and yaw reaction switched on (the
+largest step the kind has: a 15-tap kernel), and checked on the held-out part of that flight.
+
+Tolerance (float32 rounding, derived here, not measured): the largest rounding error of one
+step is in the torque combinations, sums of four squared rotor speeds that cancel, so the
+angular acceleration is off by up to a = eps32 |b|max sum(f)max per step (eps32 = 2^-23) and
+the thrust acceleration by eps32 g. Over a horizon T these integrate, to first order, into
+rates a T, attitude (quaternion) a T^2 / 2, velocity g a T^3 / 6 + eps32 g T, position
+g a T^4 / 24 + eps32 g T^2 / 2, each grown by exp(max(-k) T) when the fitted rate damping k is
+negative (an unstable mode), plus a few ulp of each state's own size (the float32 state).
+One step is T = dt; the free run T = its length.
+"""
+import json
+import re
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cdam_core import firmware as fw
+from cdam_core.cli.main import main
+from cdam_core.models.file import load_model, save_model
+from cdam_core.models.flight.physics import QuadPhysics
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "models"))
+from quad_generator import flight  # noqa: E402
+
+EPS32 = 2.0 ** -23
+LAG = 0.03          # s, the generator's rotor lag and the model's stated one
+N_FIT = 400         # 4 s of a 6 s flight at 100 Hz; rows 400.. are held out
+HOSTILE = '"); system("rm -rf /'
+
+needs_toolchain = pytest.mark.skipif(fw.toolchain_available() is not None,
+                                     reason=f"firmware toolchain: {fw.toolchain_available()}")
+
+
+@pytest.fixture(scope="module")
+def quad(tmp_path_factory):
+    U, Y, _ = flight(seconds=6.0, seed=3, lag=LAG)
+    m = QuadPhysics(lag=LAG, damping=True, reaction=True).fit(U[:N_FIT], Y[:N_FIT])
+    path = tmp_path_factory.mktemp("m") / "quad.json"
+    save_model(path, m, inputs=[f"rotor_speed_m{k}" for k in range(1, 5)],
+               outputs=[f"state_{k}" for k in range(13)], meta={"note": HOSTILE})
+    return path, U, Y
+
+
+def _array(text, name):
+    m = re.search(rf"constexpr float {name}\[(\d+)\] = \{{(.*?)\}};", text, re.S)
+    assert m, name
+    return np.array([float(v.strip().rstrip("f")) for v in m.group(2).split(",")])
+
+
+def _int(text, name):
+    return int(re.search(rf"constexpr int {name} = (-?\d+);", text).group(1))
+
+
+def test_header_holds_the_file_numbers_only(quad, tmp_path):
+    path, _, _ = quad
+    doc = json.loads(path.read_text())["model"]
+    out = tmp_path / "model.hpp"
+    assert main(["export-firmware", str(path), "-o", str(out)]) == 0
+    text = out.read_text()
+    assert "#define CDAM_MODEL_KIND 4" in text
+    for key, name in (("translation", "kTrans"), ("rotation", "kRot")):
+        np.testing.assert_array_equal(_array(text, name).astype(np.float32),
+                                      np.asarray(doc[key], np.float32))
+    # the lag kernel from the module doc: (1 - a) a^j, j < ceil(5 T / dt), normalised
+    a = np.exp(-doc["dt"] / doc["lag"])
+    w = (1 - a) * a ** np.arange(int(np.ceil(5 * doc["lag"] / doc["dt"])))
+    np.testing.assert_allclose(_array(text, "kKernelW"), w / w.sum(), rtol=1e-7)
+    assert (_int(text, "kDelayTrans"), _int(text, "kDelayRot")) == tuple(doc["delays"])
+    # t0 = 1 + (taps - 1) + 1 (reaction) + the larger delay
+    assert _int(text, "kHistory") == 1 + (w.size - 1) + 1 + max(doc["delays"])
+    assert "constexpr bool kReaction = true;" in text
+    assert "constexpr bool kRatesDynamic = true;" in text
+    assert "system" not in text and "rotor_speed" not in text and "state_" not in text
+
+
+def test_refusals_are_named(quad, tmp_path):
+    path, _, _ = quad
+    m = load_model(path)
+    m.rot_ = np.array(m.rot_)
+    m.rot_[4] = 1e39                    # finite in the file, not in float32
+    save_model(tmp_path / "big.json", m)
+    with pytest.raises(ValueError, match="kRot: not finite in float32"):
+        fw.load_firmware_model(tmp_path / "big.json")
+    assert main(["export-firmware", str(tmp_path / "big.json"), "-o",
+                 str(tmp_path / "m.hpp")]) == 2
+    assert not (tmp_path / "m.hpp").exists()
+
+
+def _tolerance(m, U, Y, T):
+    """Per state, the float32 rounding bound of the module doc over a horizon T (s)."""
+    rot = np.asarray(m.rot_)
+    f = U.astype(np.float64) ** 2
+    a = EPS32 * np.max(np.abs(rot[0:3])) * np.max(f.sum(axis=1))
+    g = float(m.gravity)
+    grow = np.exp(max(0.0, -float(np.min(rot[9:12]))) * T)
+    per = np.r_[[g * a * T ** 4 / 24 + EPS32 * g * T ** 2 / 2] * 3,
+                [g * a * T ** 3 / 6 + EPS32 * g * T] * 3, [a * T ** 2 / 2] * 4, [a * T] * 3]
+    return per * grow + 8 * EPS32 * np.max(np.abs(Y), axis=0)
+
+
+@pytest.mark.slow
+@needs_toolchain
+def test_quad_physics_on_the_board_matches_python(quad, tmp_path):
+    path, U, Y = quad
+    m = load_model(path)
+    u, y = U[N_FIT:N_FIT + 200], Y[N_FIT:N_FIT + 200]      # 2 s held out
+    rep = fw.check(path, build_dir=tmp_path / "b", record=(u, y))
+    print("quad_physics", rep)
+    assert rep["kind"] == "quad_physics" and rep["heap_free"] is True
+    assert rep["steps"] == len(u) - m.t0
+    bdir = tmp_path / "b"
+    dt = float(m.dt)
+    for mode, T in (("one_step", dt), ("free_run", (len(u) - m.t0) * dt)):
+        r = fw.run_step_equivalence(bdir, path, u, y, mode)
+        want = m.predict(u.astype(np.float32).astype(float),
+                         y.astype(np.float32).astype(float), mode=mode)[m.t0:]
+        err = np.max(np.abs(r["outputs"] - want), axis=0)
+        tol = _tolerance(m, u, np.r_[y, want], T)
+        print(mode, "error / bound per state", np.round(err / tol, 3))
+        assert np.all(err <= tol), (mode, err, tol)
+    # the issue's budget for the largest flight model is 20,000 instructions per step
+    assert rep["instructions_per_step"] <= 20000
+    assert rep["flash_bytes"] <= 16 * 1024 and rep["static_ram_bytes"] <= 2048
+
+
+@pytest.mark.slow
+@needs_toolchain
+def test_cli_check_on_the_default_record(quad, tmp_path):
+    path, _, _ = quad
+    out = tmp_path / "rep.json"
+    assert main(["firmware", "check", str(path), "--json", str(out),
+                 "--build-dir", str(tmp_path / "b")]) == 0
+    rep = json.loads(out.read_text())
+    assert rep["kind"] == "quad_physics" and rep["steps"] == 1000 - load_model(path).t0
+    # one step from the model's own trajectory near hover: rounding level of each state
+    assert rep["max_rel_error"] <= 1e-5
+    assert HOSTILE not in json.dumps(rep) and "rotor_speed" not in json.dumps(rep)
