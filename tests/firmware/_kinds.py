@@ -224,3 +224,51 @@ def quadrotor_file(path):
          "substeps": 2}
     save_model(path, GreyBox.from_dict(d))
     return path
+
+
+# the aerial manipulator of the simulator's parameter table (cdam_core.sim.parameters): body
+# m, drags, inertias; cables Im, Dm, Ks, Kd; links p1 = I1 + m1 lc1^2 + m2 l1^2,
+# p2 = m2 l1 lc2, p3 = I2 + m2 lc2^2, g1 = (m1 lc1 + m2 l1) g, g2 = m2 lc2 g; Dl
+AERIAL = {"m": 1.8, "Kx": 0.25, "Ky": 0.25, "Kz": 0.3, "Jx": 0.02, "Jy": 0.02, "Jz": 0.04,
+          "Kphi": 0.005, "Ktheta": 0.005, "Kpsi": 0.005,
+          "Im1": 1e-3, "Dm1": 2e-3, "Ks1": 20.0, "Kd1": 0.02,
+          "Im2": 1e-3, "Dm2": 2e-3, "Ks2": 15.0, "Kd2": 0.02,
+          "p1": 4e-4 + 0.12 * 0.1 ** 2 + 0.1 * 0.2 ** 2, "p2": 0.1 * 0.2 * 0.12,
+          "p3": 4e-4 + 0.1 * 0.12 ** 2, "g1": (0.12 * 0.1 + 0.1 * 0.2) * 9.81,
+          "g2": 0.1 * 0.12 * 9.81, "Dl1": 2e-3, "Dl2": 2e-3}
+AERIAL_EFFECTS = [
+    {"name": "actuator_delay", "channel": "rotors",
+     "channels": ["T", "tau_phi", "tau_theta", "tau_psi"], "delay": 0.0035},
+    {"name": "coulomb_friction", "channel": "tau_m1", "eps": 0.05, "smooth": True},
+    {"name": "backlash", "channel": "tau_l2", "width": 0.01},
+    {"name": "hardening_stiffness", "channel": "tau_l2"},
+    {"name": "asymmetric_friction", "channel": "tau_l1"},
+    {"name": "payload_mass", "channel": "Z"}]
+AERIAL_EFFECT_VALUES = {"coulomb_friction@tau_m1.Fc": 0.01,
+                        "hardening_stiffness@tau_l2.K3": 200.0,
+                        "asymmetric_friction@tau_l1.dFv": 1e-3,
+                        "asymmetric_friction@tau_l1.dFc": 2e-3,
+                        "payload_mass@Z.mass": 0.2}
+
+
+def aerial_file(path, effects=True, dt=0.001):
+    """An aerial_manipulator grey-box model (the body and both cable-driven joints) at 1 kHz,
+    with a delay on the rotors, smoothed Coulomb friction on motor 1, a backlash and a hardening
+    spring in cable 2, asymmetric friction on link 1 and a payload on Z (or none)."""
+    from cdam_core.models.greybox.registry import get_model
+    m = get_model("aerial_manipulator")
+    vals = dict(AERIAL)
+    if effects:
+        vals.update(AERIAL_EFFECT_VALUES)
+    names = list(m.parameter_names) + [k for k in vals if k not in m.parameter_names]
+    g = GreyBox.from_dict({
+        "declared": "aerial_manipulator", "dt": dt, "n_inputs": 6, "n_outputs": 10,
+        "fixed": {"m": AERIAL["m"]}, "extra_columns": [],
+        "filter": {"cutoff_hz": 2.0, "order": 4},
+        "effects": AERIAL_EFFECTS if effects else [],
+        "parameters": {"names": names, "values": [vals[n] for n in names],
+                       "std": [None] * len(names), "estimated": names[1:]},
+        "substeps": 1})
+    g = GreyBox.from_dict({**g.to_dict(), "substeps": g._choose_substeps()})
+    save_model(path, g)
+    return path

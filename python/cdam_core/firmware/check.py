@@ -29,11 +29,16 @@ def _input_range(fm: StepFirmwareModel):
         # rotor speeds within 1 % of the hover speed sqrt(g / (4 kT/m)) (the model's own kT/m)
         hover = np.sqrt(fm.floats["kGravity"] / (4.0 * abs(float(a["kTrans"][0]))))
         return np.full(n, 0.99 * hover), np.full(n, 1.01 * hover)
-    if fm.kind == "greybox" and fm.macros["CDAM_MODEL_DECLARED"] == 2:
-        # quadrotor: thrust within 10 % of the hover thrust m g, torques giving about 1 rad/s^2
+    if fm.kind == "greybox" and fm.macros["CDAM_MODEL_DECLARED"] in (2, 3):
+        # quadrotor: thrust within 10 % of the hover thrust m g, torques giving about 1 rad/s^2;
+        # aerial_manipulator: the joint motors' torques up to the links' gravity torques
+        # g1 + g2 (a swing of about a radian), then any external force column
         b = np.asarray(a["kBase"], np.float64)
-        hi = np.r_[1.1 * b[0] * 9.81, b[4:7], np.ones(n - 4)]
-        lo = np.r_[0.9 * b[0] * 9.81, -b[4:7], -np.ones(n - 4)]
+        joints = np.full(2, abs(b[21]) + abs(b[22])) if fm.macros["CDAM_MODEL_DECLARED"] == 3 \
+            else np.zeros(0)
+        rest = n - 4 - joints.size
+        hi = np.r_[1.1 * b[0] * 9.81, b[4:7], joints, np.ones(rest)]
+        lo = np.r_[0.9 * b[0] * 9.81, -b[4:7], -joints, -np.ones(rest)]
         return lo, hi
     if fm.kind == "greybox":
         # a force beyond the static ones (offset or gravity, dry friction, a payload's weight),

@@ -21,7 +21,7 @@ import numpy as np
 from cdam_core.firmware.numbers import c_array, c_float, c_int_array, finite32, theta_fnv1a
 
 KIND_CODES = {"bp_network": 0, "arx": 1, "hybrid": 2, "greybox": 3, "quad_physics": 4}
-DECLARED_CODES = {"rigid_axis": 0, "flexible_joint": 1, "quadrotor": 2}
+DECLARED_CODES = {"rigid_axis": 0, "flexible_joint": 1, "quadrotor": 2, "aerial_manipulator": 3}
 EFFECT_CODES = {"coulomb_friction": 1, "asymmetric_friction": 2, "external_force": 3,
                 "actuator_delay": 4, "backlash": 5, "hardening_stiffness": 6, "payload_mass": 7,
                 "ground_effect": 8, "thrust_loss": 9}
@@ -198,7 +198,8 @@ def _greybox(mf) -> StepFirmwareModel:
     base = [g.theta_[p] for p in decl.parameter_names]
     codes, eqs, vels, index, lag, params = [], [], [], [], [], []
     delayed = set()
-    equations = list(decl.equation_names)
+    equations = _equation_order(g)
+    cables = list(getattr(decl, "cables", {}))     # aerial_manipulator: tau_l1, tau_l2
     for j, e in enumerate(g.effects):
         if e.name not in EFFECT_CODES:
             raise ValueError(f"MODEL: model.effects[{j}]: effect {e.name!r} cannot run on the "
@@ -216,10 +217,10 @@ def _greybox(mf) -> StepFirmwareModel:
         elif e.name == "external_force":
             col = ni + list(g.extra_columns).index(e.column)
             rows = [(col, 0, [th[f"{key}.gain"], 0.0, 0.0, 0.0])]
-        elif e.name == "backlash":
-            rows = [(0, 0, [0.5 * float(e.width), 0.0, 0.0, 0.0])]
+        elif e.name == "backlash":     # the cable (aerial_manipulator) as the index
+            rows = [(_cable(g, cables, e), 0, [0.5 * float(e.width), 0.0, 0.0, 0.0])]
         elif e.name == "hardening_stiffness":
-            rows = [(0, 0, [th[f"{key}.K3"], 0.0, 0.0, 0.0])]
+            rows = [(_cable(g, cables, e), 0, [th[f"{key}.K3"], 0.0, 0.0, 0.0])]
         elif e.name == "payload_mass" and g.declared == "flexible_joint":
             rows = [(0, 0, [th[f"{key}.m"], G0 * float(e.length), 0.0, 0.0])]
         elif e.name == "payload_mass":     # the flight models: a mass on Z
@@ -260,6 +261,8 @@ def _greybox(mf) -> StepFirmwareModel:
         macros={"CDAM_MODEL_KIND": KIND_CODES["greybox"],
                 "CDAM_MODEL_DECLARED": DECLARED_CODES[g.declared]},
         hashed=("kBase", "kInertia", "kEffectParam"))
+    if g.declared == "aerial_manipulator":   # joint 1 below the body: the build's geometry
+        fm.floats["kJointDepth"] = float(decl.joint_depth)
     fm.arrays = {"kBase": base, "kInertia": inertia,
                  # one row of four values per effect (a zero row when there is none)
                  "kEffectParam": np.asarray(params, np.float64).ravel() if E else np.zeros(4)}
@@ -268,6 +271,21 @@ def _greybox(mf) -> StepFirmwareModel:
                      "kEffectLag": lag or [0]}
     return fm
 
+
+
+def _equation_order(g) -> list:
+    """The equations in the order of the grey box's error vector (the rows of its inertia
+    matrix's inverse): the declared model's equations dict at the zero state, which for
+    aerial_manipulator is tau_m1, tau_m2, tau_l1, tau_l2 after the body's six, not
+    ``equation_names``' order."""
+    z, u, ex = g._zero_state(1)
+    s = g._state(z, z, z, u, ex, np.zeros(1, dtype=int), np.zeros(1))
+    return list(g.declared_model.equations(s))
+
+
+def _cable(g, cables, e) -> int:
+    """0 for the flexible joint's one cable; the cable's number for aerial_manipulator."""
+    return cables.index(e.channel) if g.declared == "aerial_manipulator" else 0
 
 
 def _quad_physics(mf) -> StepFirmwareModel:
