@@ -155,6 +155,7 @@ def test_aerial_manipulator_with_joint_effects_matches_python(tmp_path):
     res = fw.check(path, build_dir=tmp_path / "b", record=(U, Y))
     print("aerial_manipulator", res)
     assert res["max_rel_error"] <= 1e-5 and res["max_rel_error_free_run"] <= 1e-4
+    assert res["k"] == 10 and res["max_rel_error_k_step"] <= 1e-5
     assert res["heap_free"] and res["instructions_per_step"] <= STEP_BUDGET
     bare = load_model(aerial_file(tmp_path / "bare.json", effects=False))
     t0 = bare.t0
@@ -193,7 +194,8 @@ def test_cli_check_reports_every_figure(greybox, tmp_path):
     assert rep["kind"] == "greybox" and rep["heap_free"] is True
     assert {"flash_bytes", "static_ram_bytes", "instructions_per_step", "microseconds_168mhz",
             "max_abs_error", "max_abs_error_free_run", "output_span", "max_rel_error",
-            "max_rel_error_free_run"} <= rep.keys()
+            "max_rel_error_free_run", "max_abs_error_k_step", "max_rel_error_k_step"} <= rep.keys()
+    assert rep["k"] == 10 and rep["max_abs_error_k_step"] <= 1e-5 * rep["output_span"]
     assert rep["max_abs_error"] <= 1e-5 * rep["output_span"]
     assert rep["microseconds_168mhz"] == pytest.approx(rep["instructions_per_step"] / 168, abs=0.01)
     assert "load" not in json.dumps(rep)    # no name from the file in the report either

@@ -19,7 +19,7 @@ def register(subparsers) -> None:
                                    "kind, flash_bytes, static_ram_bytes, heap_free, "
                                    "instructions per inference (network: 1,000 input vectors) "
                                    "or per step (dynamic kinds: a 1,000-row synthetic record in "
-                                   "one-step and free run), microseconds_168mhz and "
+                                   "one-step, k-step and free run), microseconds_168mhz and "
                                    "max_abs_error against the Python model. Needs "
                                    "gcc-arm-none-eabi, libnewlib-arm-none-eabi, "
                                    "libstdc++-arm-none-eabi-newlib, qemu-system-arm, cmake and "
@@ -28,6 +28,9 @@ def register(subparsers) -> None:
     c.add_argument("--data", default=None, metavar="RECORD",
                    help="arx, hybrid, greybox, quad_physics: check on this record (dataset CSV with the "
                         "model's input and output columns) instead of the synthetic one")
+    c.add_argument("--horizon", type=int, default=10, metavar="K",
+                   help="the dynamic kinds: k-step horizon compared besides one-step and free "
+                        "run (1..64, default 10)")
     c.add_argument("--json", dest="json_out", default=None, help="also write the report here")
     c.add_argument("--build-dir", default=None, help="keep the build here (default: temporary)")
     c.add_argument("--timeout", type=float, default=60.0, help="seconds per QEMU run")
@@ -41,6 +44,8 @@ def run_check(args) -> int:
 
     check_io(inputs=[("MODEL", args.model), ("--data", args.data)],
              files=[("--json", args.json_out)], folders=[("--build-dir", args.build_dir)])
+    if not 1 <= args.horizon <= 64:
+        raise CliError(f"--horizon: expected 1..64, got {args.horizon}")
     fm = load_firmware_model(args.model)     # a bad or unsupported model: exit 2, before tools
     record = _record(args.data, fm) if args.data else None
     why = toolchain_available() or firmware_sources()
@@ -48,7 +53,7 @@ def run_check(args) -> int:
         raise CliIOError(f"cannot build the firmware: {why}")
     try:
         report = check(args.model, build_dir=args.build_dir, timeout=args.timeout,
-                       record=record)
+                       record=record, k=args.horizon)
     except RuntimeError as exc:
         raise CliError(str(exc)) from None
     text = json.dumps(report, indent=1)

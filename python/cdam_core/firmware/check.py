@@ -10,7 +10,7 @@ from cdam_core.base.rng import Rng
 
 from cdam_core.firmware.build import build, heap_guard_works
 from cdam_core.firmware.model import FirmwareModel, StepFirmwareModel, load_firmware_model
-from cdam_core.firmware.qemu import run_equivalence, run_step_equivalence
+from cdam_core.firmware.qemu import MAX_K, run_equivalence, run_step_equivalence
 
 CLOCK_HZ = 168e6   # the STM32F405's core clock: microseconds = instructions / 168 (one per cycle)
 HOLD_ROWS = 20     # the synthetic record's input holds each random level this many rows
@@ -76,7 +76,11 @@ def default_record(fm: StepFirmwareModel, n: int = 1000, seed: int = 0):
     return U, Y
 
 
-def check(model_path, *, build_dir=None, inputs=None, record=None, timeout: float = 60.0) -> dict:
+K_STEP = 10   # the k-step horizon the check runs by default (0.1 s at 100 Hz, 10 ms at 1 kHz)
+
+
+def check(model_path, *, build_dir=None, inputs=None, record=None, timeout: float = 60.0,
+          k: int = K_STEP) -> dict:
     """``cdam firmware check``: build for the model, run it under QEMU, compare with Python.
 
     Args:
@@ -84,23 +88,28 @@ def check(model_path, *, build_dir=None, inputs=None, record=None, timeout: floa
         build_dir: where to build (default: a temporary folder).
         inputs: bp_network: (N, I) normalised network inputs (default: 1000 uniform vectors,
             seed 0).
-        record: arx, hybrid, greybox: (U, Y) in physical units (default:
+        record: the dynamic kinds: (U, Y) in physical units (default:
             :func:`default_record`).
+        k: the dynamic kinds: the horizon of the k-step comparison (1..64).
     Returns a dict with "kind", "flash_bytes" (text + data) and "static_ram_bytes" (data +
     bss) of the smallest image holding the model (fw_infer / fw_step), "heap_free", the
     instructions per inference or step, "microseconds_168mhz" (instructions / 168: one
     instruction a cycle, a lower bound), "max_abs_error" (one-step for the dynamic kinds; their
-    free run in "max_abs_error_free_run"), and more per kind (see the README).
+    k-step and free run in "max_abs_error_k_step" and "max_abs_error_free_run"), and more per
+    kind (see the README).
     """
     fm = load_firmware_model(model_path)
+    if isinstance(fm, StepFirmwareModel) and (isinstance(k, bool) or not isinstance(
+            k, (int, np.integer)) or not 1 <= k <= MAX_K):
+        raise ValueError(f"k: expected an integer in 1..{MAX_K}, got {k!r}")
     ctx = tempfile.TemporaryDirectory(prefix="cdam_fw_build_") if build_dir is None else None
     bdir = Path(ctx.name if ctx else build_dir)
     try:
         sizes = build(bdir, fm)
         if isinstance(fm, StepFirmwareModel):
             U, Y = default_record(fm) if record is None else record
-            runs = {mode: run_step_equivalence(bdir, fm, U, Y, mode, timeout=timeout)
-                    for mode in ("one_step", "free_run")}
+            runs = {mode: run_step_equivalence(bdir, fm, U, Y, mode, timeout=timeout, k=k)
+                    for mode in ("one_step", "k_step", "free_run")}
         else:
             X = default_inputs(fm) if inputs is None else np.asarray(inputs, dtype=np.float64)
             eq = run_equivalence(bdir, fm, X, timeout=timeout)
@@ -132,7 +141,7 @@ def check(model_path, *, build_dir=None, inputs=None, record=None, timeout: floa
 
 def _step_report(fm: StepFirmwareModel, sizes: dict, runs: dict, heap_free: bool) -> dict:
     img = sizes["fw_step"]
-    one, free = runs["one_step"], runs["free_run"]
+    one, kst, free = runs["one_step"], runs["k_step"], runs["free_run"]
     ips = max(one["instructions_per_step"], free["instructions_per_step"])
     mon = {k: one[k] for k in ("monitor_mismatches", "monitor_alarms", "monitor_alarms_python",
                                "alarm_frames_equal", "instructions_per_monitor") if k in one}
@@ -150,6 +159,9 @@ def _step_report(fm: StepFirmwareModel, sizes: dict, runs: dict, heap_free: bool
         "microseconds_168mhz": round(ips / (CLOCK_HZ / 1e6), 2),
         "max_abs_error": one["max_abs_error"],
         "max_abs_error_free_run": free["max_abs_error"],
+        "k": kst["k"],
+        "max_abs_error_k_step": kst["max_abs_error"],
+        "max_rel_error_k_step": kst["max_rel_error"],
         "output_span": one["output_span"],
         "max_rel_error": one["max_rel_error"],
         "max_rel_error_free_run": free["max_rel_error"],

@@ -70,9 +70,10 @@ class StepFirmwareModel:
             [np.asarray(self.arrays[n], np.float64).ravel() for n in MONITOR_ARRAYS] +
             [np.asarray([self.floats["kMonK"], self.floats["kMonLambda"]])]))
 
-    def predict(self, U, Y, mode: str) -> np.ndarray:
-        """The Python model's prediction (float64), rows t0.. (``one_step`` or ``free_run``)."""
-        return self.model.predict(U, Y, mode=mode)[self.history:]
+    def predict(self, U, Y, mode: str, k: int = 1) -> np.ndarray:
+        """The Python model's prediction (float64), rows t0.. (``one_step``, ``k_step`` with
+        ``k`` or ``free_run``)."""
+        return self.model.predict(U, Y, mode=mode, k=k)[self.history:]
 
     def describe(self) -> str:
         """One line without any name from the file."""
