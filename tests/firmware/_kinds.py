@@ -272,3 +272,25 @@ def aerial_file(path, effects=True, dt=0.001):
     g = GreyBox.from_dict({**g.to_dict(), "substeps": g._choose_substeps()})
     save_model(path, g)
     return path
+
+
+QUAD_LAG = 0.03     # s, the generator's rotor lag and the quad_physics model's stated one
+QUAD_N_FIT = 400    # rows of the 6 s flight the quad_physics model is fitted on
+
+
+def quad_physics_file(path, meta=None):
+    """A quad_physics model with every option that costs on the target (a 15-tap actuation
+    lag, rate damping, the yaw reaction) fitted on the first 4 s of a 6 s flight of the
+    independent generator (tests/models/quad_generator.py, 30 ms rotor lag); returns
+    (path, U, Y) of the whole flight (rows QUAD_N_FIT.. are held out)."""
+    import sys
+    from pathlib import Path
+    from cdam_core.models.flight.physics import QuadPhysics
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "models"))
+    from quad_generator import flight
+    U, Y, _ = flight(seconds=6.0, seed=3, lag=QUAD_LAG)
+    m = QuadPhysics(lag=QUAD_LAG, damping=True, reaction=True).fit(U[:QUAD_N_FIT],
+                                                                  Y[:QUAD_N_FIT])
+    save_model(path, m, inputs=[f"rotor_speed_m{k}" for k in range(1, 5)],
+               outputs=[f"state_{k}" for k in range(13)], meta=meta)
+    return path, U, Y

@@ -33,12 +33,10 @@ from cdam_core.models.file import load_model, save_model
 from cdam_core.models.flight.physics import QuadPhysics
 from cdam_core.record.realdata import shared_data_dir
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "models"))
-from quad_generator import flight  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _kinds import QUAD_N_FIT as N_FIT, quad_physics_file  # noqa: E402
 
 EPS32 = 2.0 ** -23
-LAG = 0.03          # s, the generator's rotor lag and the model's stated one
-N_FIT = 400         # 4 s of a 6 s flight at 100 Hz; rows 400.. are held out
 HOSTILE = '"); system("rm -rf /'
 FLIGHTS = shared_data_dir() / "nanodrone"
 
@@ -48,12 +46,7 @@ needs_toolchain = pytest.mark.skipif(fw.toolchain_available() is not None,
 
 @pytest.fixture(scope="module")
 def quad(tmp_path_factory):
-    U, Y, _ = flight(seconds=6.0, seed=3, lag=LAG)
-    m = QuadPhysics(lag=LAG, damping=True, reaction=True).fit(U[:N_FIT], Y[:N_FIT])
-    path = tmp_path_factory.mktemp("m") / "quad.json"
-    save_model(path, m, inputs=[f"rotor_speed_m{k}" for k in range(1, 5)],
-               outputs=[f"state_{k}" for k in range(13)], meta={"note": HOSTILE})
-    return path, U, Y
+    return quad_physics_file(tmp_path_factory.mktemp("m") / "quad.json", meta={"note": HOSTILE})
 
 
 def _array(text, name):
@@ -142,6 +135,25 @@ def test_quad_physics_on_the_board_matches_python(quad, tmp_path):
     # the issue's budget for the largest flight model is 20,000 instructions per step
     assert rep["instructions_per_step"] <= 20000
     assert rep["flash_bytes"] <= 16 * 1024 and rep["static_ram_bytes"] <= 2048
+
+
+@pytest.mark.slow
+@needs_toolchain
+def test_rates_held_as_the_benchmark_paper(quad, tmp_path):
+    """rates="hold" (the benchmark paper's physics model: w' = 0, no lag): the step without
+    the rotational dynamics, on the held-out rows."""
+    _, U, Y = quad
+    m = QuadPhysics(rates="hold").fit(U[:N_FIT], Y[:N_FIT])
+    save_model(tmp_path / "hold.json", m)
+    u, y = U[N_FIT:N_FIT + 200], Y[N_FIT:N_FIT + 200]
+    rep = fw.check(tmp_path / "hold.json", build_dir=tmp_path / "b", record=(u, y))
+    print("quad_physics hold", rep)
+    assert "rates held" in rep["model"] and rep["heap_free"]
+    assert rep["max_rel_error"] <= 1e-5 and rep["max_rel_error_k_step"] <= 1e-5
+    assert rep["max_rel_error_free_run"] <= 1e-4
+    # held rates: the free run keeps the first predicted row's rates to the last bit
+    r = fw.run_step_equivalence(tmp_path / "b", tmp_path / "hold.json", u, y, "free_run")
+    assert np.all(r["outputs"][:, 10:13] == y[m.t0 - 1, 10:13].astype(np.float32))
 
 
 @pytest.mark.slow
