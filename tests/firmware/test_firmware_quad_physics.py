@@ -94,6 +94,16 @@ def test_refusals_are_named(quad, tmp_path):
     assert not (tmp_path / "m.hpp").exists()
 
 
+def test_an_option_the_firmware_does_not_know_is_named(quad, tmp_path, monkeypatch):
+    path, _, _ = quad
+    to_dict = QuadPhysics.to_dict
+    monkeypatch.setattr(QuadPhysics, "to_dict",
+                        lambda self: {**to_dict(self), "residual_network": {}})
+    with pytest.raises(ValueError, match="model.residual_network: a quad_physics option the "
+                                         "firmware does not run yet"):
+        fw.load_firmware_model(path)
+
+
 def _tolerance(m, U, Y, T):
     """Per state, the float32 rounding bound of the module doc over a horizon T (s)."""
     rot = np.asarray(m.rot_)

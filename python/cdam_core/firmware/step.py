@@ -289,10 +289,23 @@ def _cable(g, cables, e) -> int:
     return cables.index(e.channel) if g.declared == "aerial_manipulator" else 0
 
 
+# the quad_physics model section's fields this step knows (any other is refused by name)
+QUAD_PHYSICS_FIELDS = {"dt", "rates", "drag", "gyro", "offsets", "damping", "reaction", "lag",
+                       "delay", "max_delay", "gravity", "delays", "translation",
+                       "translation_std", "rotation", "rotation_std", "start"}
+
+
 def _quad_physics(mf) -> StepFirmwareModel:
     """The quad_physics flight model (fw/quad_physics_step.hpp): its translational and
     rotational parameters, the lag kernel's weights, delays, g, dt and two switches."""
     m = mf.model
+    unknown = sorted(set(m.to_dict()) - QUAD_PHYSICS_FIELDS)
+    if unknown:       # an option added to the model that this step would silently leave out
+        raise ValueError(f"MODEL: model.{unknown[0]}: a quad_physics option the firmware "
+                         f"does not run yet")
+    if np.shape(m.trans_) != (3,) or np.shape(m.rot_) != (13,):
+        raise ValueError("MODEL: model.translation, model.rotation: not the 3 and 13 "
+                         "parameters the firmware runs")
     kernel = np.asarray(m._kernel(), np.float64)   # at most 500 taps (lag <= 100 dt)
     dT, dR = (int(d) for d in m.delays_)
     dt = float(m.dt)
