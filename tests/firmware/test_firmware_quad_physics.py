@@ -36,6 +36,8 @@ from cdam_core.record.realdata import shared_data_dir
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _kinds import QUAD_N_FIT as N_FIT, quad_physics_file  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "models"))
+
 EPS32 = 2.0 ** -23
 HOSTILE = '"); system("rm -rf /'
 FLIGHTS = shared_data_dir() / "nanodrone"
@@ -228,3 +230,25 @@ def test_bad_horizon_is_named(quad, capsys):
         fw.check(path, k=65)
     with pytest.raises(ValueError, match="k: expected an integer in 1..64 for mode 'k_step'"):
         fw.run_step_equivalence("nowhere", path, U[:50], Y[:50], "k_step")
+
+
+@pytest.mark.slow
+@needs_toolchain
+def test_residual_monitor_beside_the_flight_model(tmp_path):
+    """The monitor section (cdam_core.evaluate.monitor.calibrate on the 20 s training flight)
+    runs beside the quad_physics step: on a flight whose rotors give 10 % less thrust (the
+    generator's kT) the firmware's decisions and alarm frames are Python's, sample for
+    sample."""
+    from cdam_core.evaluate.monitor import calibrate
+    from quad_generator import TRUTH, flight
+    U, Y, _ = flight(seconds=20.0, seed=3)
+    m = QuadPhysics().fit(U, Y)
+    save_model(tmp_path / "qmon.json", m, monitor=calibrate(m, U, Y, 0.01, paths=200, seed=0))
+    fw.build(tmp_path / "b", tmp_path / "qmon.json")
+    U2, Y2, _ = flight(seconds=8.0, seed=9, truth=dict(TRUTH, kT=0.9 * TRUTH["kT"]))
+    r = fw.run_step_equivalence(tmp_path / "b", tmp_path / "qmon.json", U2, Y2, "one_step")
+    print({k: r[k] for k in ("monitor_alarms", "monitor_mismatches", "instructions_per_monitor",
+                             "instructions_per_step")})
+    assert r["monitor_alarms"] > 0 and r["monitor_mismatches"] == 0
+    assert r["alarm_frames_equal"]
+    np.testing.assert_array_equal(r["monitor_flags"], r["monitor_flags_python"])
