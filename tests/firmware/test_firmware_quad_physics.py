@@ -51,6 +51,12 @@ def quad(tmp_path_factory):
     return quad_physics_file(tmp_path_factory.mktemp("m") / "quad.json", meta={"note": HOSTILE})
 
 
+@pytest.fixture(scope="module")
+def bdir(tmp_path_factory):
+    """One build folder for the quad model's tests (a rebuild there is incremental)."""
+    return tmp_path_factory.mktemp("fw_quad")
+
+
 def _array(text, name):
     m = re.search(rf"constexpr float {name}\[(\d+)\] = \{{(.*?)\}};", text, re.S)
     assert m, name
@@ -121,15 +127,14 @@ def _tolerance(m, U, Y, T):
 
 @pytest.mark.slow
 @needs_toolchain
-def test_quad_physics_on_the_board_matches_python(quad, tmp_path):
+def test_quad_physics_on_the_board_matches_python(quad, bdir):
     path, U, Y = quad
     m = load_model(path)
     u, y = U[N_FIT:N_FIT + 200], Y[N_FIT:N_FIT + 200]      # 2 s held out
-    rep = fw.check(path, build_dir=tmp_path / "b", record=(u, y))
+    rep = fw.check(path, build_dir=bdir, record=(u, y))
     print("quad_physics", rep)
     assert rep["kind"] == "quad_physics" and rep["heap_free"] is True
     assert rep["steps"] == len(u) - m.t0
-    bdir = tmp_path / "b"
     dt = float(m.dt)
     for mode, T in (("one_step", dt), ("k_step", 10 * dt), ("free_run", (len(u) - m.t0) * dt)):
         r = fw.run_step_equivalence(bdir, path, u, y, mode, k=10)
@@ -170,11 +175,11 @@ def test_rates_held_as_the_benchmark_paper(quad, tmp_path):
 
 @pytest.mark.slow
 @needs_toolchain
-def test_cli_check_on_the_default_record(quad, tmp_path):
+def test_cli_check_on_the_default_record(quad, bdir, tmp_path):
     path, _, _ = quad
     out = tmp_path / "rep.json"
     assert main(["firmware", "check", str(path), "--json", str(out),
-                 "--build-dir", str(tmp_path / "b")]) == 0
+                 "--build-dir", str(bdir)]) == 0
     rep = json.loads(out.read_text())
     assert rep["kind"] == "quad_physics" and rep["steps"] == 1000 - load_model(path).t0
     # one step from the model's own trajectory near hover: rounding level of each state
