@@ -294,3 +294,85 @@ def quad_physics_file(path, meta=None):
     save_model(path, m, inputs=[f"rotor_speed_m{k}" for k in range(1, 5)],
                outputs=[f"state_{k}" for k in range(13)], meta=meta)
     return path, U, Y
+
+
+def quad_twin32(model, U, Y, mode):
+    """quad_physics in float32, written from the model's module doc (one RK4 step of dt per
+    sample, drive held; the quaternion normalised before and after), every operation rounded
+    to float32 in the order the expressions are written. Rows t0.. of ``mode`` (one_step or
+    free_run)."""
+    f32 = F32
+    d = model.to_dict()
+    dt = f32(d["dt"])
+    tr = np.asarray(d["translation"], f32)
+    ro = np.asarray(d["rotation"], f32)
+    g = f32(d["gravity"])
+    dT, dR = d["delays"]
+    if d["lag"]:
+        a = np.exp(-d["dt"] / d["lag"])
+        w = (1 - a) * a ** np.arange(int(np.ceil(5 * d["lag"] / d["dt"])))
+        w = (w / w.sum()).astype(f32)
+    else:
+        w = np.ones(1, f32)
+    t0 = 1 + (len(w) - 1) + (1 if d["reaction"] else 0) + max(dT, dR)
+    u32, y32 = U.astype(f32), Y.astype(f32)
+    dynamic = d["rates"] == "dynamic"
+
+    def drive(t, lag):        # sum_j w_j u(t-1-lag-j)^2
+        f = np.zeros(4, f32)
+        for j in range(len(w)):
+            r = u32[t - 1 - lag - j]
+            f = (f + w[j] * (r * r)).astype(f32)
+        return f
+
+    def unit(x):
+        q = x[6:10]
+        n = np.sqrt(f32(f32(f32(q[0] * q[0] + q[1] * q[1]) + q[2] * q[2]) + q[3] * q[3]))
+        x[6:10] = q / n
+
+    def deriv(x, thrust, acc):
+        v, (qx, qy, qz, qw), (wx, wy, wz) = x[3:6], x[6:10], x[10:13]
+        n = np.array([f32(2) * (qx * qz + qw * qy), f32(2) * (qy * qz - qw * qx),
+                      f32(1) - f32(2) * (qx * qx + qy * qy)], f32)
+        nv = f32(f32(n[0] * v[0] + n[1] * v[1]) + n[2] * v[2])
+        dx = np.empty(13, f32)
+        dx[0:3] = v
+        dx[3:6] = (thrust * n - tr[1] * v) - ((tr[2] - tr[1]) * n) * nv
+        dx[5] = dx[5] - g
+        dx[6] = f32(0.5) * (qw * wx + (qy * wz - qz * wy))
+        dx[7] = f32(0.5) * (qw * wy + (qz * wx - qx * wz))
+        dx[8] = f32(0.5) * (qw * wz + (qx * wy - qy * wx))
+        dx[9] = f32(-0.5) * f32(f32(qx * wx + qy * wy) + qz * wz)
+        gyro = np.array([wy * wz, wx * wz, wx * wy], f32)
+        dx[10:13] = (acc + ro[3:6] * gyro) - ro[9:12] * x[10:13] if dynamic else 0
+        return dx
+
+    half, sixth = f32(f32(0.5) * dt), f32(d["dt"] / 6.0)
+    x = y32[t0 - 1].copy()
+    out = []
+    for t in range(t0, len(U)):
+        if mode == "one_step":
+            x = y32[t - 1].copy()
+        unit(x)
+        f = drive(t, dT)
+        thrust = tr[0] * f32(f32(f32(f[0] + f[1]) + f[2]) + f[3])
+        acc = np.zeros(3, f32)
+        if dynamic:
+            f = drive(t, dR)
+            tau = np.array([f32(f32(-f[0] - f[1]) + f[2]) + f[3],
+                            f32(f32(-f[0] + f[1]) + f[2]) - f[3],
+                            f32(f32(-f[0] + f[1]) - f[2]) + f[3]], f32)
+            acc = ro[0:3] * tau + ro[6:9]
+            if d["reaction"]:
+                a, b = u32[t - 1 - dR], u32[t - 2 - dR]
+                s = f32(f32(f32((a[0] - b[0]) * f32(-1)) + (a[1] - b[1]))
+                        + (a[2] - b[2]) * f32(-1)) + (a[3] - b[3])
+                acc[2] = acc[2] + ro[12] * f32(s / dt)
+        k1 = deriv(x, thrust, acc)
+        k2 = deriv(x + half * k1, thrust, acc)
+        k3 = deriv(x + half * k2, thrust, acc)
+        k4 = deriv(x + dt * k3, thrust, acc)
+        x = x + sixth * (((k1 + f32(2) * k2) + f32(2) * k3) + k4)
+        unit(x)
+        out.append(x.copy())
+    return np.array(out, f32)

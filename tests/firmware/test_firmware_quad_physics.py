@@ -7,8 +7,10 @@ The model is fitted on a short flight of the independent numpy generator
 first-order rotor lag of 30 ms) with the lag, rate damping and yaw reaction switched on (the
 largest step the kind has: a 15-tap kernel), and checked on the held-out part of that flight.
 
-Tolerance (float32 rounding, derived here, not measured): the largest rounding error of one
-step is in the torque combinations, sums of four squared rotor speeds that cancel, so the
+The firmware's outputs equal, bit for bit, a plain numpy float32 twin of the equations
+(tests/firmware/_kinds.py, written from the model's module doc). Against the Python model
+(float64), the tolerance (float32 rounding, derived here, not measured): the largest rounding
+error of one step is in the torque combinations, sums of four squared rotor speeds that cancel, so the
 angular acceleration is off by up to a = eps32 |b|max sum(f)max per step (eps32 = 2^-23) and
 the thrust acceleration by eps32 g. Over a horizon T these integrate, to first order, into
 rates a T, attitude (quaternion) a T^2 / 2, velocity g a T^3 / 6 + eps32 g T, position
@@ -34,7 +36,7 @@ from cdam_core.models.flight.physics import QuadPhysics
 from cdam_core.record.realdata import shared_data_dir
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _kinds import QUAD_N_FIT as N_FIT, quad_physics_file  # noqa: E402
+from _kinds import QUAD_N_FIT as N_FIT, quad_physics_file, quad_twin32  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "models"))
 
@@ -149,6 +151,8 @@ def test_quad_physics_on_the_board_matches_python(quad, bdir):
         assert np.all(err <= (1e-4 if mode == "free_run" else 1e-5) * span)
         if mode == "k_step":   # rows t0 .. t0 + k - 2 have no origin k rows back: measured
             np.testing.assert_array_equal(r["outputs"][:9], y[m.t0:m.t0 + 9].astype(np.float32))
+        else:                  # the same float32 operations as a numpy twin of the equations
+            np.testing.assert_array_equal(r["outputs"], quad_twin32(m, u, y, mode))
     # the budget for the largest flight model is 20,000 instructions per step
     assert rep["instructions_per_step"] <= 20000
     assert rep["flash_bytes"] <= 16 * 1024 and rep["static_ram_bytes"] <= 2048
@@ -225,6 +229,7 @@ def test_nanodrone_flight_model_on_the_board(tmp_path):
         span = np.ptp(y.astype(np.float32).astype(float), axis=0)
         print(mode, "error / span per state", np.round(err / span, 8))
         assert np.all(err <= (1e-5 if mode == "one_step" else 1e-4) * span)
+        np.testing.assert_array_equal(r["outputs"], quad_twin32(m, u, y, mode))
 
 
 def test_bad_horizon_is_named(quad, capsys):
