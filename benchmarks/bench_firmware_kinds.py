@@ -1,13 +1,15 @@
 """Every model kind on the Cortex-M4F (needs arm-none-eabi-gcc and qemu-system-arm; returns {}
 without them): `cdam firmware check` on one model of each kind, built here from the test
 builders (tests/firmware/_kinds.py) and, where the shared data are there, from the EMPS record
-(an ARX(2, 2, 1) and the grey-box model the residual loop finds on DATA_EMPS).
+(an ARX(2, 2, 1) and the grey-box model the residual loop finds on DATA_EMPS) and a nano-drone
+flight (quad_physics).
 
 "ratio": the 1 kHz loop's budget on a 168 MHz STM32F405 (168,000 cycles) over the instructions
 per step of the costliest kind measured in this run (one instruction a cycle, a lower bound on
 the cycles): the headroom at 1 kHz. Per kind: instructions per step (mean), microseconds at
 168 MHz, flash (text + data) and static RAM (data + bss) of the smallest image with the model,
-and the largest error of an output over its span against the Python model (one-step, free run).
+and the largest error of an output over its span against the Python model (one-step, k-step
+with k = 10, free run).
 """
 from __future__ import annotations
 
@@ -48,6 +50,25 @@ def _emps_models(tmp: Path) -> dict:
     return {"arx_emps": tmp / "emps_arx.json", "greybox_emps": tmp / "emps_gb.json"}
 
 
+def _nanodrone_model(tmp: Path) -> dict:
+    """quad_physics (the documented defaults) fitted on the longest clean stretch of the
+    nano-drone flight random1 run 1 ({} without the flights)."""
+    import numpy as np
+    from cdam_core.models import save_model
+    from cdam_core.models.flight.physics import QuadPhysics
+    from cdam_core.record.realdata import shared_data_dir
+    from cdam_core.record.realdata.nanodrone import INPUTS, STATES, load_nanodrone
+    path = shared_data_dir() / "nanodrone" / "random1_20251017_run1.parquet"
+    if not path.is_file():
+        return {}
+    ds = load_nanodrone(path)
+    a, b = max(ds.segments, key=lambda s: s[1] - s[0])
+    U = np.column_stack([ds.column(c) for c in INPUTS])[a:b]
+    Y = np.column_stack([ds.column(c) for c in STATES])[a:b]
+    save_model(tmp / "nano.json", QuadPhysics(dt=0.01).fit(U, Y))
+    return {"quad_physics_nanodrone": tmp / "nano.json"}
+
+
 def bench_kinds() -> dict:
     if fw.toolchain_available():
         return {}
@@ -62,13 +83,18 @@ def bench_kinds() -> dict:
                   "hybrid": k.hybrid_file(tmp / "hybrid.json")[0],
                   "greybox_rigid_4_effects": k.greybox_file(tmp / "rigid.json"),
                   "greybox_flexible_6_effects": k.flexible_file(tmp / "flex.json"),
-                  "greybox_quadrotor_4_effects": k.quadrotor_file(tmp / "quad.json")}
+                  "greybox_quadrotor_4_effects": k.quadrotor_file(tmp / "quad.json"),
+                  "greybox_aerial_manipulator_6_effects": k.aerial_file(tmp / "aerial.json"),
+                  "quad_physics_lag_damping_reaction":
+                      k.quad_physics_file(tmp / "quad_physics.json")[0],
+                  **_nanodrone_model(tmp)}
         for name, path in models.items():
             rep = fw.check(path, build_dir=tmp / f"b_{name}")
             ips = rep.get("instructions_per_step", rep.get("instructions_per_prediction"))
             out[name] = {"instructions": ips, "us_168mhz": rep["microseconds_168mhz"],
                          "flash": rep["flash_bytes"], "static_ram": rep["static_ram_bytes"],
                          "error_one_step": rep.get("max_rel_error", rep["max_abs_error"]),
+                         "error_k_step": rep.get("max_rel_error_k_step"),
                          "error_free_run": rep.get("max_rel_error_free_run"),
                          "heap_free": rep["heap_free"]}
     secs = time.perf_counter() - t0

@@ -1,8 +1,12 @@
 // The step check of the dynamic kinds (arx, hybrid, greybox) under QEMU with semihosting:
-// ./fw_step_in.bin holds int32 rows, int32 mode (0: one-step, 1: free run), then `rows` rows of
-// float32 [u (kU), y (kY)]. Rows 0 .. kT0-1 prime the model with the measured history; every
-// later row is predicted (fw::StepModel::step) and, in one-step mode, then replaced by the
-// measured row (correct). The predictions go to ./fw_step_out.bin (float32, kY per row).
+// ./fw_step_in.bin holds int32 rows, int32 mode (0: one-step, 1: free run, k = 2..kMaxK:
+// k-step), then `rows` rows of float32 [u (kU), y (kY)]. Rows 0 .. kT0-1 prime the model with
+// the measured history; every later row is predicted (fw::StepModel::step) and, in one-step
+// mode, then replaced by the measured row (correct). k-step: row t is predicted by k steps
+// from a copy of a model that has taken the measured rows up to t - k (one-step below, k rows
+// behind), rows t-k+1 .. t from a ring of the last kMaxK rows; rows kT0 .. kT0+k-2 are
+// returned as measured (as cdam_core.models.protocol does). The predictions go to
+// ./fw_step_out.bin (float32, kY per row).
 // Instructions: SysTick (core clock = virtual time under -icount) read around every step; the
 // host turns ticks into instructions with the calibration loop. With a monitor section
 // (CDAM_MODEL_HAS_MONITOR, fw/monitor.hpp) and in one-step mode, every predicted row also goes
@@ -27,9 +31,25 @@ namespace {
 using fw::ticks::elapsed;
 
 fw::StepModel g_model;
+constexpr int kMaxK = 64;                  // the longest k-step horizon
+fw::StepModel g_scratch;                   // k-step: the model run ahead from g_model
+float g_rows[kMaxK][fw::kU + fw::kY];      // k-step: the last kMaxK rows of the record
 #if CDAM_MODEL_HAS_MONITOR
 fw::Monitor<fw::kY> g_monitor;
 #endif
+
+// one step with SysTick read around it: the ticks summed, the largest kept, the steps counted
+void timed_step(fw::StepModel& model, const float* u, float* y, std::uint64_t& total,
+                std::uint32_t& largest, std::uint32_t& count) {
+  const std::uint32_t t0 = fw::hal::systick_value();
+  __asm__ volatile("" ::: "memory");
+  model.step(u, y);
+  __asm__ volatile("" ::: "memory");
+  const std::uint32_t d = elapsed(t0, fw::hal::systick_value());
+  total += d;
+  if (d > largest) largest = d;
+  ++count;
+}
 
 }  // namespace
 
@@ -70,8 +90,9 @@ int main() {
 #endif
   std::int32_t head[2];
   if (sh::read(in, head, sizeof head) != sizeof head) return 3;
-  if (head[0] < fw::kT0 || (head[1] != 0 && head[1] != 1)) return 4;
-  std::uint32_t steps = 0, max_ticks = 0;
+  if (head[0] < fw::kT0 || head[1] < 0 || head[1] > kMaxK) return 4;
+  const int k_ahead = head[1] >= 2 ? head[1] : 0;
+  std::uint32_t steps = 0, timed = 0, max_ticks = 0;
   std::uint64_t total_ticks = 0;
   float row[fw::kU + fw::kY], y[fw::kY];
   for (std::int32_t t = 0; t < head[0]; ++t) {
@@ -80,15 +101,27 @@ int main() {
     const float* ym = row + fw::kU;
     if (t < fw::kT0) {
       g_model.prime(u, ym);
+      if (k_ahead) for (int c = 0; c < fw::kU + fw::kY; ++c) g_rows[t % kMaxK][c] = row[c];
       continue;
     }
-    const std::uint32_t t0 = fw::hal::systick_value();
-    __asm__ volatile("" ::: "memory");
-    g_model.step(u, y);
-    __asm__ volatile("" ::: "memory");
-    const std::uint32_t d = elapsed(t0, fw::hal::systick_value());
-    total_ticks += d;
-    if (d > max_ticks) max_ticks = d;
+    if (k_ahead) {
+      for (int c = 0; c < fw::kU + fw::kY; ++c) g_rows[t % kMaxK][c] = row[c];
+      ++steps;
+      if (t < fw::kT0 + k_ahead - 1) {   // no origin k rows back yet: the measured row
+        if (sh::write(out, ym, sizeof y) != sizeof y) return 3;
+        continue;
+      }
+      g_scratch = g_model;               // has taken the measured rows up to t - k
+      for (std::int32_t j = t - k_ahead + 1; j < t; ++j) g_scratch.step(g_rows[j % kMaxK], y);
+      timed_step(g_scratch, u, y, total_ticks, max_ticks, timed);
+      if (sh::write(out, y, sizeof y) != sizeof y) return 3;
+      const float* r = g_rows[(t - k_ahead + 1) % kMaxK];   // one row on, measured
+      float skip[fw::kY];
+      g_model.step(r, skip);
+      g_model.correct(r + fw::kU);
+      continue;
+    }
+    timed_step(g_model, u, y, total_ticks, max_ticks, timed);
     ++steps;
 #if CDAM_MODEL_HAS_MONITOR
     if (head[1] == 0) {
@@ -128,6 +161,7 @@ int main() {
   sh::kv("monitor_ticks_lo", static_cast<std::uint32_t>(monitor_ticks));
 #endif
   sh::kv("steps", steps);
+  sh::kv("timed", timed);
   sh::kv("step_ticks_hi", static_cast<std::uint32_t>(total_ticks >> 32));
   sh::kv("step_ticks_lo", static_cast<std::uint32_t>(total_ticks));
   sh::kv("step_ticks_max", max_ticks);

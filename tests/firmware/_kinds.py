@@ -224,3 +224,155 @@ def quadrotor_file(path):
          "substeps": 2}
     save_model(path, GreyBox.from_dict(d))
     return path
+
+
+# the aerial manipulator of the simulator's parameter table (cdam_core.sim.parameters): body
+# m, drags, inertias; cables Im, Dm, Ks, Kd; links p1 = I1 + m1 lc1^2 + m2 l1^2,
+# p2 = m2 l1 lc2, p3 = I2 + m2 lc2^2, g1 = (m1 lc1 + m2 l1) g, g2 = m2 lc2 g; Dl
+AERIAL = {"m": 1.8, "Kx": 0.25, "Ky": 0.25, "Kz": 0.3, "Jx": 0.02, "Jy": 0.02, "Jz": 0.04,
+          "Kphi": 0.005, "Ktheta": 0.005, "Kpsi": 0.005,
+          "Im1": 1e-3, "Dm1": 2e-3, "Ks1": 20.0, "Kd1": 0.02,
+          "Im2": 1e-3, "Dm2": 2e-3, "Ks2": 15.0, "Kd2": 0.02,
+          "p1": 4e-4 + 0.12 * 0.1 ** 2 + 0.1 * 0.2 ** 2, "p2": 0.1 * 0.2 * 0.12,
+          "p3": 4e-4 + 0.1 * 0.12 ** 2, "g1": (0.12 * 0.1 + 0.1 * 0.2) * 9.81,
+          "g2": 0.1 * 0.12 * 9.81, "Dl1": 2e-3, "Dl2": 2e-3}
+AERIAL_EFFECTS = [
+    {"name": "actuator_delay", "channel": "rotors",
+     "channels": ["T", "tau_phi", "tau_theta", "tau_psi"], "delay": 0.0035},
+    {"name": "coulomb_friction", "channel": "tau_m1", "eps": 0.05, "smooth": True},
+    {"name": "backlash", "channel": "tau_l2", "width": 0.01},
+    {"name": "hardening_stiffness", "channel": "tau_l2"},
+    {"name": "asymmetric_friction", "channel": "tau_l1"},
+    {"name": "payload_mass", "channel": "Z"}]
+AERIAL_EFFECT_VALUES = {"coulomb_friction@tau_m1.Fc": 0.01,
+                        "hardening_stiffness@tau_l2.K3": 200.0,
+                        "asymmetric_friction@tau_l1.dFv": 1e-3,
+                        "asymmetric_friction@tau_l1.dFc": 2e-3,
+                        "payload_mass@Z.mass": 0.2}
+
+
+def aerial_file(path, effects=True, dt=0.001):
+    """An aerial_manipulator grey-box model (the body and both cable-driven joints) at 1 kHz,
+    with a delay on the rotors, smoothed Coulomb friction on motor 1, a backlash and a hardening
+    spring in cable 2, asymmetric friction on link 1 and a payload on Z (or none)."""
+    from cdam_core.models.greybox.registry import get_model
+    m = get_model("aerial_manipulator")
+    vals = dict(AERIAL)
+    if effects:
+        vals.update(AERIAL_EFFECT_VALUES)
+    names = list(m.parameter_names) + [k for k in vals if k not in m.parameter_names]
+    g = GreyBox.from_dict({
+        "declared": "aerial_manipulator", "dt": dt, "n_inputs": 6, "n_outputs": 10,
+        "fixed": {"m": AERIAL["m"]}, "extra_columns": [],
+        "filter": {"cutoff_hz": 2.0, "order": 4},
+        "effects": AERIAL_EFFECTS if effects else [],
+        "parameters": {"names": names, "values": [vals[n] for n in names],
+                       "std": [None] * len(names), "estimated": names[1:]},
+        "substeps": 1})
+    g = GreyBox.from_dict({**g.to_dict(), "substeps": g._choose_substeps()})
+    save_model(path, g)
+    return path
+
+
+QUAD_LAG = 0.03     # s, the generator's rotor lag and the quad_physics model's stated one
+QUAD_N_FIT = 400    # rows of the 6 s flight the quad_physics model is fitted on
+
+
+def quad_physics_file(path, meta=None):
+    """A quad_physics model with every option that costs on the target (a 15-tap actuation
+    lag, rate damping, the yaw reaction) fitted on the first 4 s of a 6 s flight of the
+    independent generator (tests/models/quad_generator.py, 30 ms rotor lag); returns
+    (path, U, Y) of the whole flight (rows QUAD_N_FIT.. are held out)."""
+    import sys
+    from pathlib import Path
+    from cdam_core.models.flight.physics import QuadPhysics
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "models"))
+    from quad_generator import flight
+    U, Y, _ = flight(seconds=6.0, seed=3, lag=QUAD_LAG)
+    m = QuadPhysics(lag=QUAD_LAG, damping=True, reaction=True).fit(U[:QUAD_N_FIT],
+                                                                  Y[:QUAD_N_FIT])
+    save_model(path, m, inputs=[f"rotor_speed_m{k}" for k in range(1, 5)],
+               outputs=[f"state_{k}" for k in range(13)], meta=meta)
+    return path, U, Y
+
+
+def quad_twin32(model, U, Y, mode):
+    """quad_physics in float32, written from the model's module doc (one RK4 step of dt per
+    sample, drive held; the quaternion normalised before and after), every operation rounded
+    to float32 in the order the expressions are written. Rows t0.. of ``mode`` (one_step or
+    free_run)."""
+    f32 = F32
+    d = model.to_dict()
+    dt = f32(d["dt"])
+    tr = np.asarray(d["translation"], f32)
+    ro = np.asarray(d["rotation"], f32)
+    g = f32(d["gravity"])
+    dT, dR = d["delays"]
+    if d["lag"]:
+        a = np.exp(-d["dt"] / d["lag"])
+        w = (1 - a) * a ** np.arange(int(np.ceil(5 * d["lag"] / d["dt"])))
+        w = (w / w.sum()).astype(f32)
+    else:
+        w = np.ones(1, f32)
+    t0 = 1 + (len(w) - 1) + (1 if d["reaction"] else 0) + max(dT, dR)
+    u32, y32 = U.astype(f32), Y.astype(f32)
+    dynamic = d["rates"] == "dynamic"
+
+    def drive(t, lag):        # sum_j w_j u(t-1-lag-j)^2
+        f = np.zeros(4, f32)
+        for j in range(len(w)):
+            r = u32[t - 1 - lag - j]
+            f = (f + w[j] * (r * r)).astype(f32)
+        return f
+
+    def unit(x):
+        q = x[6:10]
+        n = np.sqrt(f32(f32(f32(q[0] * q[0] + q[1] * q[1]) + q[2] * q[2]) + q[3] * q[3]))
+        x[6:10] = q / n
+
+    def deriv(x, thrust, acc):
+        v, (qx, qy, qz, qw), (wx, wy, wz) = x[3:6], x[6:10], x[10:13]
+        n = np.array([f32(2) * (qx * qz + qw * qy), f32(2) * (qy * qz - qw * qx),
+                      f32(1) - f32(2) * (qx * qx + qy * qy)], f32)
+        nv = f32(f32(n[0] * v[0] + n[1] * v[1]) + n[2] * v[2])
+        dx = np.empty(13, f32)
+        dx[0:3] = v
+        dx[3:6] = (thrust * n - tr[1] * v) - ((tr[2] - tr[1]) * n) * nv
+        dx[5] = dx[5] - g
+        dx[6] = f32(0.5) * (qw * wx + (qy * wz - qz * wy))
+        dx[7] = f32(0.5) * (qw * wy + (qz * wx - qx * wz))
+        dx[8] = f32(0.5) * (qw * wz + (qx * wy - qy * wx))
+        dx[9] = f32(-0.5) * f32(f32(qx * wx + qy * wy) + qz * wz)
+        gyro = np.array([wy * wz, wx * wz, wx * wy], f32)
+        dx[10:13] = (acc + ro[3:6] * gyro) - ro[9:12] * x[10:13] if dynamic else 0
+        return dx
+
+    half, sixth = f32(f32(0.5) * dt), f32(d["dt"] / 6.0)
+    x = y32[t0 - 1].copy()
+    out = []
+    for t in range(t0, len(U)):
+        if mode == "one_step":
+            x = y32[t - 1].copy()
+        unit(x)
+        f = drive(t, dT)
+        thrust = tr[0] * f32(f32(f32(f[0] + f[1]) + f[2]) + f[3])
+        acc = np.zeros(3, f32)
+        if dynamic:
+            f = drive(t, dR)
+            tau = np.array([f32(f32(-f[0] - f[1]) + f[2]) + f[3],
+                            f32(f32(-f[0] + f[1]) + f[2]) - f[3],
+                            f32(f32(-f[0] + f[1]) - f[2]) + f[3]], f32)
+            acc = ro[0:3] * tau + ro[6:9]
+            if d["reaction"]:
+                a, b = u32[t - 1 - dR], u32[t - 2 - dR]
+                s = f32(f32(f32((a[0] - b[0]) * f32(-1)) + (a[1] - b[1]))
+                        + (a[2] - b[2]) * f32(-1)) + (a[3] - b[3])
+                acc[2] = acc[2] + ro[12] * f32(s / dt)
+        k1 = deriv(x, thrust, acc)
+        k2 = deriv(x + half * k1, thrust, acc)
+        k3 = deriv(x + half * k2, thrust, acc)
+        k4 = deriv(x + dt * k3, thrust, acc)
+        x = x + sixth * (((k1 + f32(2) * k2) + f32(2) * k3) + k4)
+        unit(x)
+        out.append(x.copy())
+    return np.array(out, f32)

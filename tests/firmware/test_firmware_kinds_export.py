@@ -1,4 +1,5 @@
-"""Export of the dynamic kinds (arx, hybrid, greybox) for the firmware, no toolchain needed:
+"""Export of the dynamic kinds (arx, hybrid, greybox incl. the aerial manipulator) for the
+firmware, no toolchain needed:
 numbers only (checked against the model file read as plain JSON), no text from the file, the
 refusals, and the float32 twins against the Python models."""
 import json
@@ -13,8 +14,9 @@ from cdam_core import firmware as fw
 from cdam_core.cli.main import main
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _kinds import (QUAD, RIGID, arx_file, arx_twin32, flexible_file,  # noqa: E402
-                    greybox_file, hybrid_file, quadrotor_file, rigid_record, rigid_twin32)
+from _kinds import (AERIAL, QUAD, RIGID, aerial_file, arx_file, arx_twin32,  # noqa: E402
+                    flexible_file, greybox_file, hybrid_file, quadrotor_file, rigid_record,
+                    rigid_twin32)
 
 HOSTILE = '"); system("rm -rf /'
 
@@ -173,21 +175,41 @@ def test_quadrotor_header(tmp_path):
     np.testing.assert_allclose(inv, want, rtol=1e-7, atol=1e-12)
 
 
-def test_unsupported_greybox_is_named(tmp_path):
+def test_aerial_manipulator_header_numbers_and_codes(tmp_path):
+    """The body's and both joints' parameters in the declared order, the joint depth, and each
+    effect's code, equation row (the error vector's order: the body's six, tau_m1, tau_m2,
+    tau_l1, tau_l2), velocity and cable."""
+    from cdam_core.models.greybox.registry import get_model
+    path = aerial_file(tmp_path / "am.json")
+    text = fw.export_header(path, tmp_path / "model.hpp").read_text()
+    assert "#define CDAM_MODEL_DECLARED 3" in text
+    names = get_model("aerial_manipulator").parameter_names
+    np.testing.assert_array_equal(_array(text, "kBase").astype(np.float32),
+                                  np.array([AERIAL[n] for n in names], np.float32))
+    assert "constexpr float kJointDepth = 0.0799999982f;" in text      # float32 of 0.08 m
+    codes = re.search(r"kEffectCode\[\d+\] = \{(.*?)\}", text).group(1)
+    eqs = re.search(r"kEffectEq\[\d+\] = \{(.*?)\}", text).group(1)
+    idx = re.search(r"kEffectIndex\[\d+\] = \{(.*?)\}", text).group(1)
+    # delay x 4 rotor commands, Coulomb on tau_m1 (row 6), backlash and hardening on cable 2
+    # (tau_l2, row 9, index 1), asymmetric friction on tau_l1 (row 8), payload on Z (row 2)
+    assert codes == "4, 4, 4, 4, 1, 5, 6, 2, 7"
+    assert eqs == "0, 0, 0, 0, 6, 9, 9, 8, 2"
+    assert idx == "0, 1, 2, 3, 0, 1, 1, 0, 0"
+
+
+def test_unsupported_greybox_effect_is_named(tmp_path):
     from cdam_core.models.file import save_model
     from cdam_core.models.greybox.augmented import GreyBox
-    from cdam_core.models.greybox.registry import get_model
-    m = get_model("aerial_manipulator")
-    names = list(m.parameter_names)
-    values = [0.1 if n == "p2" else 1.0 for n in names]
-    g = GreyBox.from_dict({
-        "declared": "aerial_manipulator", "dt": 0.01, "n_inputs": len(m.inputs),
-        "n_outputs": len(m.positions), "fixed": {}, "extra_columns": [],
-        "filter": {"cutoff_hz": 2.0, "order": 4}, "effects": [],
-        "parameters": {"names": names, "values": values,
-                       "std": [None] * len(names), "estimated": names}, "substeps": 1})
-    save_model(tmp_path / "am.json", g)
-    with pytest.raises(ValueError, match="aerial_manipulator.*cannot run on the firmware"):
+    g = GreyBox.from_dict(json.loads(aerial_file(tmp_path / "a.json", effects=False)
+                                     .read_text())["model"])
+    d = g.to_dict()
+    d["effects"] = [{"name": "arm_coupling", "channel": "X"}]
+    extra = [f"arm_coupling@X.{n}" for n in ("c0", "c1", "c2")]
+    d["parameters"] = {k: list(v) + ([0.01] * 3 if k == "values" else
+                                     [None] * 3 if k == "std" else extra)
+                       for k, v in d["parameters"].items()}
+    save_model(tmp_path / "am.json", GreyBox.from_dict(d))
+    with pytest.raises(ValueError, match="effect 'arm_coupling' cannot run on the firmware"):
         fw.load_firmware_model(tmp_path / "am.json")
     assert main(["export-firmware", str(tmp_path / "am.json"), "-o",
                  str(tmp_path / "m.hpp")]) == 2

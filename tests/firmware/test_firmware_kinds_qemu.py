@@ -1,7 +1,7 @@
 """Every dynamic model kind on the emulated STM32F405 (qemu-system-arm -M netduinoplus2): arx
 (raw and physics features), hybrid (ARX + residual network), greybox (rigid axis with Coulomb
 and asymmetric friction, an external force and an actuator delay; a flexible joint with every
-effect of its library; the joint the residual loop finds on a simulated arm with friction; and
+effect of its library; the quadrotor and the aerial manipulator with joint and flight effects; the joint the residual loop finds on a simulated arm with friction; and
 the EMPS axis fitted by the residual loop when the shared data are there).
 
 The firmware is compared with the Python model (float64) and, for arx and greybox, bit for bit
@@ -20,8 +20,8 @@ from cdam_core import firmware as fw
 from cdam_core.models.file import load_model
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _kinds import (RIGID, arx_file, arx_twin32, flexible_file, greybox_file,  # noqa: E402
-                    hybrid_file, quadrotor_file, rigid_record, rigid_twin32)
+from _kinds import (RIGID, aerial_file, arx_file, arx_twin32, flexible_file,  # noqa: E402
+                    greybox_file, hybrid_file, quadrotor_file, rigid_record, rigid_twin32)
 
 pytestmark = [pytest.mark.slow,
               pytest.mark.skipif(fw.toolchain_available() is not None,
@@ -145,6 +145,24 @@ def test_quadrotor_with_flight_effects_matches_python(tmp_path):
     assert res["heap_free"] and res["instructions_per_step"] <= STEP_BUDGET
 
 
+def test_aerial_manipulator_with_joint_effects_matches_python(tmp_path):
+    """The body and both cable-driven joints at 1 kHz with a rotor delay, Coulomb friction on
+    motor 1, backlash and a hardening spring in cable 2, asymmetric friction on link 1 and a
+    payload, on the synthetic record (thrust near hover, joint torques up to the links'
+    gravity torques); the effects change the free run far beyond the firmware's error."""
+    path = aerial_file(tmp_path / "am.json")
+    U, Y = fw.default_record(fw.load_firmware_model(path))
+    res = fw.check(path, build_dir=tmp_path / "b", record=(U, Y))
+    print("aerial_manipulator", res)
+    assert res["max_rel_error"] <= 1e-5 and res["max_rel_error_free_run"] <= 1e-4
+    assert res["k"] == 10 and res["max_rel_error_k_step"] <= 1e-5
+    assert res["heap_free"] and res["instructions_per_step"] <= STEP_BUDGET
+    bare = load_model(aerial_file(tmp_path / "bare.json", effects=False))
+    t0 = bare.t0
+    moved = np.max(np.abs(bare.predict(U, Y, mode="free_run")[t0:, 6:] - Y[t0:, 6:]))
+    assert moved >= 1000 * res["max_abs_error_free_run"]
+
+
 def test_simulated_arm_found_effect(tmp_path):
     """cdam simulate (joint excitation, Coulomb friction on motor 1) -> cdam residual
     --model flexible_joint --save -> the saved model on the board, on the simulated record."""
@@ -184,7 +202,8 @@ def test_cli_check_reports_every_figure(greybox, tmp_path, capsys):
     assert rep["kind"] == "greybox" and rep["heap_free"] is True
     assert {"flash_bytes", "static_ram_bytes", "instructions_per_step", "microseconds_168mhz",
             "max_abs_error", "max_abs_error_free_run", "output_span", "max_rel_error",
-            "max_rel_error_free_run"} <= rep.keys()
+            "max_rel_error_free_run", "max_abs_error_k_step", "max_rel_error_k_step"} <= rep.keys()
+    assert rep["k"] == 10 and rep["max_abs_error_k_step"] <= 1e-5 * rep["output_span"]
     assert rep["max_abs_error"] <= 1e-5 * rep["output_span"]
     assert rep["microseconds_168mhz"] == pytest.approx(rep["instructions_per_step"] / 168, abs=0.01)
     assert "load" not in json.dumps(rep)    # no name from the file in the report either

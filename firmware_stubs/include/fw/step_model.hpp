@@ -1,9 +1,10 @@
 // The dynamic model kinds on the target, one sample at a time: `arx`, `hybrid` (ARX + a static
-// network on its residual) and `greybox` (a declared model plus the effects the residual loop
-// found, integrated as cdam_core.models.greybox.augmented.GreyBox does). The numbers come from
+// network on its residual), `greybox` (a declared model plus the effects the residual loop
+// found, integrated as cdam_core.models.greybox.augmented.GreyBox does) and `quad_physics` (the
+// flight model's rigid body, RK4 per sample: fw/quad_physics_step.hpp). The numbers come from
 // generated/model.hpp (`cdam export-firmware`); the structure (which effect, which declared
 // model) is an integer code there, never a name. Fixed sizes, no heap; libm only for tanhf (a
-// smoothed Coulomb friction) and sinf (the flexible joint's gravity and payload terms).
+// smoothed Coulomb friction), sinf and cosf (gravity, payload and attitude terms).
 //
 // One interface for every kind (rows t = 0, 1, ... of one record):
 //   prime(u, y)    rows 0 .. kHistory-1: a measured row (input u(t), output y(t)) as history;
@@ -15,6 +16,7 @@
 // with -ffp-contract=off so that no multiply-add is fused), so the firmware differs from Python
 // by float32 rounding only.
 #pragma once
+#define CDAM_FW_STEP_MODEL_HPP
 #include <cstdint>
 
 #include "model.hpp"
@@ -285,29 +287,55 @@ class StepModel {
 #elif CDAM_MODEL_DECLARED == 2
     // quadrotor [m, Kx, Ky, Kz, Jx, Jy, Jz, Kphi, Ktheta, Kpsi], positions (phi, theta, psi,
     // X, Y, Z), inputs (T, tau_phi, tau_theta, tau_psi); flight.Quadrotor.equations
+    (void)th;
     const float pd = v_[0], td = v_[1], yd = v_[2];
     const float tz = vertical_thrust(u);
-    float ux, uy;
-    thrust_xy(&ux, &uy);
-    e[0] = u[0] * ux;
-    e[0] = e[0] - th[1] * v_[3];
-    e[1] = u[0] * uy;
-    e[1] = e[1] - th[2] * v_[4];
-    e[2] = tz;
-    e[2] = e[2] - th[0] * (0.0f + kG0);
-    e[2] = e[2] - th[3] * v_[5];
-    e[3] = u[1];
-    e[3] = e[3] - th[5] * (-td * yd);
-    e[3] = e[3] - th[6] * (td * yd);
-    e[3] = e[3] - th[7] * pd;
-    e[4] = u[2];
-    e[4] = e[4] - th[6] * (-pd * yd);
-    e[4] = e[4] - th[4] * (pd * yd);
-    e[4] = e[4] - th[8] * td;
-    e[5] = u[3];
-    e[5] = e[5] - th[4] * (-pd * td);
-    e[5] = e[5] - th[5] * (pd * td);
-    e[5] = e[5] - th[9] * yd;
+    quadrotor_errors(u, tz, pd, td, yd, e);
+#elif CDAM_MODEL_DECLARED == 3
+    // aerial_manipulator: the quadrotor's six equations (th[0..9]), then both cable-driven
+    // joints (flight.AerialManipulator.equations, columns at zero acceleration; the equation
+    // errors in the Python dict's order tau_m1, tau_m2, tau_l1, tau_l2, as the inertia matrix):
+    // th[10..24] = Im1 Dm1 Ks1 Kd1 Im2 Dm2 Ks2 Kd2 p1 p2 p3 g1 g2 Dl1 Dl2; positions 6..9 =
+    // theta_m1 theta_m2 q1 q2, inputs 4, 5 = tau_m1 tau_m2.
+    const float pd = v_[0], td = v_[1], yd = v_[2];
+    const float tz = vertical_thrust(u);
+    quadrotor_errors(u, tz, pd, td, yd, e);
+    float d[2], dd[2];
+    for (int k = 0; k < 2; ++k) {
+      d[k] = deflection(k);
+      dd[k] = v_[6 + k] - v_[8 + k];
+      float& r = e[6 + k];   // tau_mk = Imk thmk'' + Dmk thmk' + Ksk dk + Kdk dk'
+      r = u[4 + k];
+      r = r - th[11 + 4 * k] * v_[6 + k];
+      r = r - th[12 + 4 * k] * d[k];
+      r = r - th[13 + 4 * k] * dd[k];
+    }
+    // link 1's absolute rate in the arm plane w = theta' + q1'; the specific force over g at
+    // joint 1 at zero acceleration: (-stheta g, cphi ctheta g + depth theta'^2) / g
+    const float q1 = x_[8], q2 = x_[9], q1d = v_[8], q2d = v_[9];
+    const float w1 = td + q1d;
+    const float c2 = std::cos(q2), s2 = std::sin(q2);
+    const float st = std::sin(x_[1]);
+    const float gx = -(st * kG0) / kG0;
+    const float gz = ((std::cos(x_[0]) * std::cos(x_[1])) * kG0 +
+                      cdam_model::kJointDepth * (td * td)) / kG0;
+    const float g1 = std::sin(q1) * gz - std::cos(q1) * gx;
+    const float g2 = std::sin(q1 + q2) * gz - std::cos(q1 + q2) * gx;
+    float& l1 = e[8];   // p1 w'' + p3 (w'' + q2'') + p2 (...) + g1 G1 + g2 G2 + Dl1 q1' - cable
+    l1 = 0.0f;
+    l1 = l1 - th[19] * (c2 * 0.0f - s2 * (2.0f * w1 * q2d + q2d * q2d));
+    l1 = l1 - th[21] * g1;
+    l1 = l1 - th[22] * g2;
+    l1 = l1 - th[23] * q1d;
+    l1 = l1 - th[12] * -d[0];
+    l1 = l1 - th[13] * -dd[0];
+    float& l2 = e[9];   // p3 (w'' + q2'') + p2 (cos q2 w'' + sin q2 w'^2) + g2 G2 + Dl2 q2' - cable
+    l2 = 0.0f;
+    l2 = l2 - th[19] * (c2 * 0.0f + s2 * (w1 * w1));
+    l2 = l2 - th[22] * g2;
+    l2 = l2 - th[24] * q2d;
+    l2 = l2 - th[16] * -d[1];
+    l2 = l2 - th[17] * -dd[1];
 #else
 #error "declared model not supported on the firmware"
 #endif
@@ -342,7 +370,16 @@ class StepModel {
           r = r - p[0] * (0.0f + p[1] * std::sin(x_[1]));
           break;
 #endif
-#if CDAM_MODEL_DECLARED == 2
+#if CDAM_MODEL_DECLARED == 3
+        case effect::kHardening: {   // K3 d^3 on motor k's equation, -K3 d^3 on link k's
+          const int c = cdam_model::kEffectIndex[k];
+          const float d3 = (d[c] * d[c]) * d[c];
+          e[6 + c] = e[6 + c] - p[0] * d3;
+          e[8 + c] = e[8 + c] - p[0] * -d3;
+          break;
+        }
+#endif
+#if CDAM_MODEL_DECLARED == 2 || CDAM_MODEL_DECLARED == 3
         case effect::kPayload:   // mass (Z'' + g) on Z, Z'' = 0
           r = r - p[0] * (0.0f + kG0);
           break;
@@ -362,7 +399,33 @@ class StepModel {
     }
   }
 
-#if CDAM_MODEL_DECLARED == 2
+#if CDAM_MODEL_DECLARED == 2 || CDAM_MODEL_DECLARED == 3
+  // the six body equations of flight.Quadrotor at zero acceleration (th = kBase)
+  void quadrotor_errors(const float* u, float tz, float pd, float td, float yd, float* e) const {
+    const float* th = cdam_model::kBase;
+    float ux, uy;
+    thrust_xy(&ux, &uy);
+    e[0] = u[0] * ux;
+    e[0] = e[0] - th[1] * v_[3];
+    e[1] = u[0] * uy;
+    e[1] = e[1] - th[2] * v_[4];
+    e[2] = tz;
+    e[2] = e[2] - th[0] * (0.0f + kG0);
+    e[2] = e[2] - th[3] * v_[5];
+    e[3] = u[1];
+    e[3] = e[3] - th[5] * (-td * yd);
+    e[3] = e[3] - th[6] * (td * yd);
+    e[3] = e[3] - th[7] * pd;
+    e[4] = u[2];
+    e[4] = e[4] - th[6] * (-pd * yd);
+    e[4] = e[4] - th[4] * (pd * yd);
+    e[4] = e[4] - th[8] * td;
+    e[5] = u[3];
+    e[5] = e[5] - th[4] * (-pd * td);
+    e[5] = e[5] - th[5] * (pd * td);
+    e[5] = e[5] - th[9] * yd;
+  }
+
   static constexpr float kG0 = 9.81f;   // cdam_core.models.greybox.flight.G0
   // T times the world z component of the body z axis (Z-Y-X Euler angles): T cphi ctheta
   float vertical_thrust(const float* u) const {
@@ -391,6 +454,20 @@ class StepModel {
     return d;
   }
 #endif
+#if CDAM_MODEL_DECLARED == 3
+  // cable k's deflection theta_mk - qk, through the dead band of a backlash on that cable
+  float deflection(int cable) const {
+    const float d = x_[6 + cable] - x_[8 + cable];
+    for (int k = 0; k < kE; ++k) {
+      if (cdam_model::kEffectCode[k] != effect::kBacklash ||
+          cdam_model::kEffectIndex[k] != cable) continue;
+      const float h = cdam_model::kEffectParam[k * 4];
+      const float m = std::fabs(d) - h;
+      return static_cast<float>((d > 0.0f) - (d < 0.0f)) * (m > 0.0f ? m : 0.0f);
+    }
+    return d;
+  }
+#endif
 
   float x_[kN] = {}, v_[kN] = {}, xlast_[kN] = {}, xprev_[kN] = {};
   float u_[kRing][kU] = {};
@@ -407,3 +484,7 @@ inline std::uint32_t params_fnv1a() {
 #endif
 
 }  // namespace fw
+
+#if CDAM_MODEL_KIND == 4
+#include "fw/quad_physics_step.hpp"   // the quad_physics flight model: RK4 on 13 states
+#endif

@@ -14,12 +14,12 @@ def register(subparsers) -> None:
     sub = p.add_subparsers(dest="firmware_command", metavar="ACTION")
     c = sub.add_parser("check", help="build for MODEL, run the equivalence and cost checks",
                        description="Cross-builds firmware_stubs/ for MODEL (any kind: "
-                                   "bp_network, arx, hybrid, greybox) with arm-none-eabi-gcc, "
+                                   "bp_network, arx, hybrid, greybox, quad_physics) with arm-none-eabi-gcc, "
                                    "runs it on qemu-system-arm -M netduinoplus2 and prints the "
                                    "kind, flash_bytes, static_ram_bytes, heap_free, "
                                    "instructions per inference (network: 1,000 input vectors) "
                                    "or per step (dynamic kinds: a 1,000-row synthetic record in "
-                                   "one-step and free run), microseconds_168mhz and "
+                                   "one-step, k-step and free run), microseconds_168mhz and "
                                    "max_abs_error against the Python model. Needs "
                                    "gcc-arm-none-eabi, libnewlib-arm-none-eabi, "
                                    "libstdc++-arm-none-eabi-newlib, qemu-system-arm, cmake and "
@@ -27,8 +27,11 @@ def register(subparsers) -> None:
                                    "one is named, with exit code 3.")
     c.add_argument("model", metavar="MODEL", help="model file (.json)")
     c.add_argument("--data", default=None, metavar="RECORD",
-                   help="arx, hybrid, greybox: check on this record (dataset CSV with the "
+                   help="arx, hybrid, greybox, quad_physics: check on this record (dataset CSV with the "
                         "model's input and output columns) instead of the synthetic one")
+    c.add_argument("--horizon", type=int, default=10, metavar="K",
+                   help="the dynamic kinds: k-step horizon compared besides one-step and free "
+                        "run (1..64, default 10)")
     c.add_argument("--json", dest="json_out", default=None, metavar="FILE",
                    help="also write the results as JSON to FILE")
     add_outputs(c, json=False)
@@ -45,6 +48,8 @@ def run_check(args) -> int:
     check_io(inputs=[("MODEL", args.model), ("--data", args.data)],
              files=[("--json", args.json_out)],
              folders=[("--build-dir", args.build_dir), ("--report", args.report)])
+    if not 1 <= args.horizon <= 64:
+        raise CliError(f"--horizon: expected 1..64, got {args.horizon}")
     fm = load_firmware_model(args.model)     # a bad or unsupported model: exit 2, before tools
     record = _record(args.data, fm) if args.data else None
     why = toolchain_available() or firmware_sources()
@@ -53,7 +58,7 @@ def run_check(args) -> int:
     note(args, f"building the {fm.kind} firmware and running it under QEMU (about a minute)")
     try:
         report = check(args.model, build_dir=args.build_dir, timeout=args.timeout,
-                       record=record)
+                       record=record, k=args.horizon)
     except RuntimeError as exc:
         raise CliError(str(exc)) from None
     text = json.dumps(report, indent=1)
@@ -95,11 +100,11 @@ def _record(path, fm):
     from cdam_core.record.dataset import read_dataset
     if not isinstance(fm, StepFirmwareModel):
         raise CliError("--data: a bp_network model is checked on input vectors; --data is for "
-                       "arx, hybrid and greybox models")
+                       "the dynamic kinds")
     ds = read_dataset(path, inputs=fm.inputs, outputs=fm.outputs)
     if len(ds) <= fm.history:
         raise CliError(f"--data: {len(ds)} rows; the model needs more than {fm.history}")
-    if fm.kind == "greybox":
+    if fm.kind in ("greybox", "quad_physics"):
         dt = float(np.median(np.diff(ds.t)))
         if not np.isclose(dt, fm.floats["kDt"], rtol=1e-6, atol=0.0):
             raise CliError(f"--data: sampled every {dt:g} s; the model integrates at "

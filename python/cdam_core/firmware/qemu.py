@@ -80,15 +80,17 @@ def run_equivalence(build_dir, model, X_normalised, *, timeout: float = 60.0,
     }
 
 
-MODES = {"one_step": 0, "free_run": 1}
+MODES = {"one_step": 0, "free_run": 1, "k_step": None}   # k_step: the header carries k
+MAX_K = 64    # the longest k-step horizon of fw_step_check (kMaxK there)
 
 
 def run_step_equivalence(build_dir, model, U, Y, mode: str = "one_step", *,
-                         timeout: float = 60.0) -> dict:
+                         timeout: float = 60.0, k: int | None = None) -> dict:
     """The dynamic kinds (arx, hybrid, greybox): fw_step_check.elf runs the record (U (N, I),
     Y (N, m), physical units, rounded to float32) through ``fw::StepModel`` in ``mode``
-    ("one_step": every row's prediction from the measured history; "free_run": from the first
-    t0 measured rows only) and is compared with the Python model (float64) on the same
+    ("one_step": every row's prediction from the measured history; "k_step": from the measured
+    rows up to t - k, ``k`` in 1..MAX_K, and its own predictions after; "free_run": from the
+    first t0 measured rows only) and is compared with the Python model (float64) on the same
     float32-rounded record.
 
     Returns max_abs_error (over rows t0.. and outputs), output_span (the largest max - min of
@@ -101,6 +103,12 @@ def run_step_equivalence(build_dir, model, U, Y, mode: str = "one_step", *,
         raise ValueError("model: a bp_network model: use run_equivalence")
     if mode not in MODES:
         raise ValueError(f"mode: expected one of {', '.join(MODES)}, got {mode!r}")
+    if mode == "k_step":
+        if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 1 <= k <= MAX_K:
+            raise ValueError(f"k: expected an integer in 1..{MAX_K} for mode 'k_step', got {k!r}")
+        code = int(k) if k > 1 else MODES["one_step"]
+    else:
+        code = MODES[mode]
     U = np.asarray(U, dtype=np.float64)
     Y = np.asarray(Y, dtype=np.float64)
     for name, a, w in (("U", U, fm.n_inputs), ("Y", Y, fm.n_outputs)):
@@ -114,7 +122,7 @@ def run_step_equivalence(build_dir, model, U, Y, mode: str = "one_step", *,
     U32, Y32 = U.astype(np.float32), Y.astype(np.float32)
     with tempfile.TemporaryDirectory(prefix="cdam_fw_") as tmp:
         with open(Path(tmp) / "fw_step_in.bin", "wb") as f:
-            f.write(struct.pack("<ii", U.shape[0], MODES[mode]))
+            f.write(struct.pack("<ii", U.shape[0], code))
             f.write(np.hstack([U32, Y32]).astype("<f4").tobytes())
         rc, kv, text = run_qemu(Path(build_dir).resolve() / "fw_step_check.elf", tmp,
                                 timeout=timeout)
@@ -130,7 +138,8 @@ def run_step_equivalence(build_dir, model, U, Y, mode: str = "one_step", *,
         raise RuntimeError(f"firmware answered {P.shape[0]} of {steps} steps")
     if int(kv["params_fnv1a"], 16) != fm.params_fnv1a():
         raise RuntimeError("the firmware's parameters differ from the model's (FNV-1a mismatch)")
-    want = fm.predict(U32.astype(np.float64), Y32.astype(np.float64), mode)
+    want = fm.predict(U32.astype(np.float64), Y32.astype(np.float64), mode, k=k or 1)
+    timed = int(kv.get("timed", steps))
     tpi = int(kv["cal_ticks"]) / int(kv["cal_instructions"])
     total = (int(kv["step_ticks_hi"]) << 32) + int(kv["step_ticks_lo"])
     empty = int(kv["empty_ticks"])
@@ -140,11 +149,12 @@ def run_step_equivalence(build_dir, model, U, Y, mode: str = "one_step", *,
         if monitored else {}
     return {**extra,
         "mode": mode,
+        "k": int(k) if mode == "k_step" else None,
         "max_abs_error": float(np.max(err)),
         "output_span": float(np.max(span)),
         "max_rel_error": float(np.max(np.where(span > 0, err / np.where(span > 0, span, 1),
                                                np.where(err > 0, np.inf, 0.0)))),
-        "instructions_per_step": round((total - empty * steps) / steps / tpi, 1),
+        "instructions_per_step": round((total - empty * timed) / max(timed, 1) / tpi, 1),
         "instructions_per_step_max": round((int(kv["step_ticks_max"]) - empty) / tpi, 1),
         "stack_bytes": int(kv["stack_bytes"]),
         "sandbox": kv["sandbox"],

@@ -20,8 +20,8 @@ import numpy as np
 
 from cdam_core.firmware.numbers import c_array, c_float, c_int_array, finite32, theta_fnv1a
 
-KIND_CODES = {"bp_network": 0, "arx": 1, "hybrid": 2, "greybox": 3}
-DECLARED_CODES = {"rigid_axis": 0, "flexible_joint": 1, "quadrotor": 2}
+KIND_CODES = {"bp_network": 0, "arx": 1, "hybrid": 2, "greybox": 3, "quad_physics": 4}
+DECLARED_CODES = {"rigid_axis": 0, "flexible_joint": 1, "quadrotor": 2, "aerial_manipulator": 3}
 EFFECT_CODES = {"coulomb_friction": 1, "asymmetric_friction": 2, "external_force": 3,
                 "actuator_delay": 4, "backlash": 5, "hardening_stiffness": 6, "payload_mass": 7,
                 "ground_effect": 8, "thrust_loss": 9}
@@ -70,9 +70,10 @@ class StepFirmwareModel:
             [np.asarray(self.arrays[n], np.float64).ravel() for n in MONITOR_ARRAYS] +
             [np.asarray([self.floats["kMonK"], self.floats["kMonLambda"]])]))
 
-    def predict(self, U, Y, mode: str) -> np.ndarray:
-        """The Python model's prediction (float64), rows t0.. (``one_step`` or ``free_run``)."""
-        return self.model.predict(U, Y, mode=mode)[self.history:]
+    def predict(self, U, Y, mode: str, k: int = 1) -> np.ndarray:
+        """The Python model's prediction (float64), rows t0.. (``one_step``, ``k_step`` with
+        ``k`` or ``free_run``)."""
+        return self.model.predict(U, Y, mode=mode, k=k)[self.history:]
 
     def describe(self) -> str:
         """One line without any name from the file."""
@@ -83,6 +84,10 @@ class StepFirmwareModel:
             feats = "physics" if i["kPhysics"] else "raw"
             return (f"{self.kind} ({i['kNa']}, {i['kNb']}, {i['kNk']}) on {feats} features, "
                     f"{self.n_inputs} in, {self.n_outputs} out{net}")
+        if self.kind == "quad_physics":
+            return (f"quad_physics, 13 states, rates {'dynamic' if i['kRatesDynamic'] else 'held'}"
+                    f", {i['kKernel']}-tap actuation lag, delays {i['kDelayTrans']}/"
+                    f"{i['kDelayRot']} samples, one RK4 step per sample")
         return (f"greybox, {self.model.declared}, {i['kEffects']} effect(s), "
                 f"{i['kSubsteps']} substep(s) per sample")
 
@@ -114,6 +119,8 @@ def step_model(mf, source: str = "") -> StepFirmwareModel:
         fm = _arx(mf)
     elif mf.kind == "greybox":
         fm = _greybox(mf)
+    elif mf.kind == "quad_physics":
+        fm = _quad_physics(mf)
     else:
         raise ValueError(f"MODEL: a {mf.kind!r} model cannot run on the firmware")
     fm.source = str(source)
@@ -192,7 +199,8 @@ def _greybox(mf) -> StepFirmwareModel:
     base = [g.theta_[p] for p in decl.parameter_names]
     codes, eqs, vels, index, lag, params = [], [], [], [], [], []
     delayed = set()
-    equations = list(decl.equation_names)
+    equations = _equation_order(g)
+    cables = list(getattr(decl, "cables", {}))     # aerial_manipulator: tau_l1, tau_l2
     for j, e in enumerate(g.effects):
         if e.name not in EFFECT_CODES:
             raise ValueError(f"MODEL: model.effects[{j}]: effect {e.name!r} cannot run on the "
@@ -210,10 +218,10 @@ def _greybox(mf) -> StepFirmwareModel:
         elif e.name == "external_force":
             col = ni + list(g.extra_columns).index(e.column)
             rows = [(col, 0, [th[f"{key}.gain"], 0.0, 0.0, 0.0])]
-        elif e.name == "backlash":
-            rows = [(0, 0, [0.5 * float(e.width), 0.0, 0.0, 0.0])]
+        elif e.name == "backlash":     # the cable (aerial_manipulator) as the index
+            rows = [(_cable(g, cables, e), 0, [0.5 * float(e.width), 0.0, 0.0, 0.0])]
         elif e.name == "hardening_stiffness":
-            rows = [(0, 0, [th[f"{key}.K3"], 0.0, 0.0, 0.0])]
+            rows = [(_cable(g, cables, e), 0, [th[f"{key}.K3"], 0.0, 0.0, 0.0])]
         elif e.name == "payload_mass" and g.declared == "flexible_joint":
             rows = [(0, 0, [th[f"{key}.m"], G0 * float(e.length), 0.0, 0.0])]
         elif e.name == "payload_mass":     # the flight models: a mass on Z
@@ -254,10 +262,62 @@ def _greybox(mf) -> StepFirmwareModel:
         macros={"CDAM_MODEL_KIND": KIND_CODES["greybox"],
                 "CDAM_MODEL_DECLARED": DECLARED_CODES[g.declared]},
         hashed=("kBase", "kInertia", "kEffectParam"))
+    if g.declared == "aerial_manipulator":   # joint 1 below the body: the build's geometry
+        fm.floats["kJointDepth"] = float(decl.joint_depth)
     fm.arrays = {"kBase": base, "kInertia": inertia,
                  # one row of four values per effect (a zero row when there is none)
                  "kEffectParam": np.asarray(params, np.float64).ravel() if E else np.zeros(4)}
     fm.int_arrays = {"kEffectCode": codes or [0], "kEffectEq": eqs or [0],
                      "kEffectVel": vels or [0], "kEffectIndex": index or [0],
                      "kEffectLag": lag or [0]}
+    return fm
+
+
+
+def _equation_order(g) -> list:
+    """The equations in the order of the grey box's error vector (the rows of its inertia
+    matrix's inverse): the declared model's equations dict at the zero state, which for
+    aerial_manipulator is tau_m1, tau_m2, tau_l1, tau_l2 after the body's six, not
+    ``equation_names``' order."""
+    z, u, ex = g._zero_state(1)
+    s = g._state(z, z, z, u, ex, np.zeros(1, dtype=int), np.zeros(1))
+    return list(g.declared_model.equations(s))
+
+
+def _cable(g, cables, e) -> int:
+    """0 for the flexible joint's one cable; the cable's number for aerial_manipulator."""
+    return cables.index(e.channel) if g.declared == "aerial_manipulator" else 0
+
+
+# the quad_physics model section's fields this step knows (any other is refused by name)
+QUAD_PHYSICS_FIELDS = {"dt", "rates", "drag", "gyro", "offsets", "damping", "reaction", "lag",
+                       "delay", "max_delay", "gravity", "delays", "translation",
+                       "translation_std", "rotation", "rotation_std", "start"}
+
+
+def _quad_physics(mf) -> StepFirmwareModel:
+    """The quad_physics flight model (fw/quad_physics_step.hpp): its translational and
+    rotational parameters, the lag kernel's weights, delays, g, dt and two switches."""
+    m = mf.model
+    unknown = sorted(set(m.to_dict()) - QUAD_PHYSICS_FIELDS)
+    if unknown:       # an option added to the model that this step would silently leave out
+        raise ValueError(f"MODEL: model.{unknown[0]}: a quad_physics option the firmware "
+                         f"does not run yet")
+    if np.shape(m.trans_) != (3,) or np.shape(m.rot_) != (13,):
+        raise ValueError("MODEL: model.translation, model.rotation: not the 3 and 13 "
+                         "parameters the firmware runs")
+    kernel = np.asarray(m._kernel(), np.float64)   # at most 500 taps (lag <= 100 dt)
+    dT, dR = (int(d) for d in m.delays_)
+    dt = float(m.dt)
+    fm = StepFirmwareModel(
+        "quad_physics", m, list(mf.inputs), list(mf.outputs), int(m.t0), mf.sha256,
+        ints={"kKind": KIND_CODES["quad_physics"], "kInputs": 4, "kOutputs": 13,
+              "kHistory": int(m.t0), "kKernel": int(kernel.size), "kDelayTrans": dT,
+              "kDelayRot": dR, "kReaction": bool(m.reaction),
+              "kRatesDynamic": m.rates == "dynamic"},
+        floats={"kDt": dt, "kDt6": dt / 6.0, "kGravity": float(m.gravity)},
+        macros={"CDAM_MODEL_KIND": KIND_CODES["quad_physics"]},
+        hashed=("kTrans", "kRot", "kKernelW"))
+    fm.arrays = {"kTrans": np.asarray(m.trans_, np.float64),
+                 "kRot": np.asarray(m.rot_, np.float64), "kKernelW": kernel}
     return fm
