@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['Rng', 'SIM_CONTROL_SIZE', 'SIM_NLOG', 'SIM_NSP', 'SIM_NU', 'SIM_NX', 'SIM_PLANT_SIZE', 'bp_fitness', 'five_point_cubic_smooth', 'minmax_apply', 'minmax_fit', 'mlp_forward', 'mlp_jacobian', 'mlp_jtj', 'mlp_mse_gradient', 'mlp_num_params', 'narx_regressors', 'narx_simulate', 'optimise', 'sim_closed_loop', 'sim_fastest_rate', 'sim_open_loop', 'sim_rhs', 'sim_substeps', 'train_gd', 'train_lm']
+__all__: list[str] = ['Rng', 'SIM_CONTROL_SIZE', 'SIM_NLOG', 'SIM_NSP', 'SIM_NU', 'SIM_NX', 'SIM_PLANT_SIZE', 'bp_fitness', 'cancel_native_loops', 'five_point_cubic_smooth', 'minmax_apply', 'minmax_fit', 'mlp_forward', 'mlp_jacobian', 'mlp_jtj', 'mlp_mse_gradient', 'mlp_num_params', 'narx_regressors', 'narx_simulate', 'optimise', 'sim_closed_loop', 'sim_fastest_rate', 'sim_open_loop', 'sim_rhs', 'sim_substeps', 'train_gd', 'train_lm']
 class Rng:
     """
     xoshiro128** with splitmix32 seeding; the numpy twin draws the same stream.
@@ -25,6 +25,10 @@ class Rng:
 def bp_fitness(thetas: numpy.ndarray, X: numpy.ndarray, T: numpy.ndarray, hidden: typing.SupportsInt | typing.SupportsIndex, activation: str = 'tansig', threads: typing.SupportsInt | typing.SupportsIndex = 2) -> numpy.ndarray:
     """
     Training MSE sum((T - Y)^2) / (N m) of each theta (rows of a (n, D) array, or one (D,)); deterministic for any thread count.
+    """
+def cancel_native_loops(cancel: bool = True) -> None:
+    """
+    Ask every native loop running in any thread to stop at its next poll (they end with RuntimeError: cancelled), or, with cancel=False, withdraw the request. For a program that is shutting down worker threads (cdam batch on Ctrl-C).
     """
 def five_point_cubic_smooth(y: numpy.ndarray, passes: typing.SupportsInt | typing.SupportsIndex = 1) -> numpy.ndarray:
     """

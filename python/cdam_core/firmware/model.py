@@ -34,6 +34,11 @@ class FirmwareModel:
     source: str = ""
 
     @property
+    def kind(self) -> str:
+        """The model file's kind (a network; the dynamic kinds are StepFirmwareModel's)."""
+        return "bp_network"
+
+    @property
     def n_inputs(self) -> int:
         return len(self.x_min)
 
