@@ -140,3 +140,19 @@ def test_cli_never_loses_the_analysis(tmp_path):
     assert "tau" in js["declared_error"] and js["declared_error"]["tau"]["rmse"] > 0
     assert "M" in js["feasibility"]["declared"]["violations"]
     assert js["feasibility"]["declared"]["unconstrained"]["M"] == pytest.approx(-2.0, rel=0.05)
+
+
+def test_map_takes_the_common_syntax_and_refuses_a_factor(tmp_path, capsys):
+    """--map is parsed as every other --map (text or a JSON file); a scale factor, which the
+    saved model could not carry, is a named error before anything is computed."""
+    rec = rigid_axis_record(seed=2, Fc=1.5, duration=3.0)
+    _csv(tmp_path / "r.csv", rec)
+    rc = main(["residual", str(tmp_path / "r.csv"), "--model", "rigid_axis", "--map",
+               "tau=force*2,q=pos"])
+    assert rc == 2 and "--map: tau=force*2" in capsys.readouterr().err
+    (tmp_path / "map.json").write_text(json.dumps({"tau": "force", "q": "pos"}))
+    assert main(["residual", str(tmp_path / "r.csv"), "--model", "rigid_axis", "--map",
+                 str(tmp_path / "map.json"), "--no-free-run", "--json",
+                 str(tmp_path / "o.json")]) == 0
+    js = json.loads((tmp_path / "o.json").read_text())
+    assert js["findings"][0]["effect"] == "coulomb_friction"

@@ -8,22 +8,38 @@ from pathlib import Path
 
 from cdam_core.base.jsonio import write_text_atomic
 from cdam_core.cli.common import CliError, add_outputs, check_io, elapsed_ticker
+from cdam_core.record.columns import parse_column_map
 
 
 def _split(s):
     return [x.strip() for x in s.split(",") if x.strip()] if s else []
 
 
-def parse_map(text: str | None) -> dict:
-    """``"tau=force,q=qm"`` -> ``{"tau": "force", "q": "qm"}``."""
+def parse_fixed(text: str | None) -> dict:
+    """``"m=1.8,Jz=0.02"`` -> ``{"m": 1.8, "Jz": 0.02}`` (known parameters)."""
     out = {}
     for item in _split(text):
         if "=" not in item:
-            raise ValueError(f"--map: expected name=column, got {item!r}")
+            raise ValueError(f"--fixed: expected name=value, got {item!r}")
         k, v = (x.strip() for x in item.split("=", 1))
         if not k or not v:
-            raise ValueError(f"--map: empty name or column in {item!r}")
-        out[k] = v
+            raise ValueError(f"--fixed: empty name or value in {item!r}")
+        try:
+            out[k] = float(v)
+        except ValueError:
+            raise ValueError(f"--fixed: {k}: not a number: {v!r}") from None
+    return out
+
+
+def signal_map(spec) -> dict:
+    """``--map`` (the record.columns syntax: text or a JSON file) -> ``{signal: column}``.
+    A scale factor is refused: the saved model reads its columns as they are."""
+    out = {}
+    for k, (col, f) in parse_column_map(spec, "--map").items():
+        if f != 1.0:
+            raise ValueError(f"--map: {k}={col}*{f:g}: cdam residual reads the columns as they "
+                             f"are (a factor would not reach the saved model); scale the record")
+        out[k] = col
     return out
 
 
@@ -48,7 +64,7 @@ def run(args) -> int:
         raise CliError(f"--alpha: expected a significance level in (0, 1), got {args.alpha}")
     model = get_model(args.model)  # fails early, clearly, for an unknown model
     mapping = dict(model.defaults)
-    given = parse_map(args.map)
+    given = signal_map(args.map)
     for k in given:
         if k not in model.signals:
             raise ValueError(f"--map: {args.model} has no signal {k!r} "
@@ -67,12 +83,7 @@ def run(args) -> int:
     signals = {name: ds.column(col) for name, col in mapping.items()}
     used = set(mapping.values())
     extra = {c: ds.column(c) for c in inputs if c not in used}
-    fixed = {}
-    for k, v in parse_map(args.fixed).items():
-        try:
-            fixed[k] = float(v)
-        except ValueError:
-            raise ValueError(f"--fixed: {k}: not a number: {v!r}") from None
+    fixed = parse_fixed(args.fixed)
     # effects the sidecar's model declares are part of the declared model
     from cdam_core.models.greybox.effects import LIBRARY
     meta = getattr(ds, "meta", None) or {}
@@ -186,7 +197,8 @@ def register(subparsers) -> None:
     p.add_argument("--inputs", help="comma-separated input columns; those not mapped to the "
                                     "model are candidates for external_force")
     p.add_argument("--outputs", help="comma-separated output columns")
-    p.add_argument("--map", help="model signal names to columns, e.g. tau=force,q=qm")
+    p.add_argument("--map", help="model signal names to columns, e.g. tau=force,q=qm, or a JSON "
+                                 "file of them (the syntax of every --map)")
     p.add_argument("--json", help="write the JSON result here")
     p.add_argument("--test", help="test record (dataset CSV, same columns): the declared and "
                                   "the final model simulated open loop from its first --n-init "
