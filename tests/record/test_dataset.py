@@ -1,6 +1,5 @@
 """The dataset format reader/writer (issue 4, "The dataset format")."""
 import json
-import time
 
 import numpy as np
 import pytest
@@ -134,18 +133,17 @@ def test_atomic_write_leaves_old_file_on_failure(tmp_path, monkeypatch):
     assert [f.name for f in tmp_path.iterdir() if f.name.endswith(".tmp")] == []
 
 
-def test_read_speed_30000_by_15(tmp_path):
+def test_round_trip_30000_by_15(tmp_path):
+    """A record of a 30 s, 1 kHz flight's size comes back exactly (its reading speed against
+    pandas is benchmarks/bench_record.py's)."""
     rng = np.random.default_rng(0)
     n = 30000
     ds = Dataset(t=np.arange(n) * 1e-3, columns=[f"c{i}" for i in range(14)],
                  data=rng.standard_normal((n, 14)))
     p = tmp_path / "big.csv"
     write_dataset(p, ds)
-    t0 = time.perf_counter()
     back = read_dataset(p)
-    elapsed = time.perf_counter() - t0
-    assert np.array_equal(back.data, ds.data)
-    assert elapsed < 1.0, f"reading took {elapsed:.2f} s"
+    assert np.array_equal(back.data, ds.data) and np.array_equal(back.t, ds.t)
 
 
 @settings(max_examples=25, deadline=None)
