@@ -32,9 +32,12 @@ LOG="$PWD/build/setup.log"
 fail() { echo "setup: $1 failed; the last lines of $LOG:" >&2; tail -n 25 "$LOG" >&2; exit 1; }
 
 APT_PKGS=(g++ python3-venv python3-dev)
+# cmake on PATH for the firmware build (`cdam firmware` runs `cmake`, not .venv/bin/cmake);
+# git for the tests that clone the checkout (tests/test_fresh_clone.py, test_readme.py)
 [ $FIRMWARE -eq 1 ] && APT_PKGS+=(gcc-arm-none-eabi libnewlib-arm-none-eabi
-                                  libstdc++-arm-none-eabi-newlib qemu-system-arm libeigen3-dev)
-[ $TESTS -eq 1 ] && APT_PKGS+=(doctest-dev chromium-headless-shell)
+                                  libstdc++-arm-none-eabi-newlib qemu-system-arm libeigen3-dev
+                                  cmake)
+[ $TESTS -eq 1 ] && APT_PKGS+=(doctest-dev chromium-headless-shell git)
 missing=()
 for p in "${APT_PKGS[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -129,6 +129,23 @@ def _tolerance(m, U, Y, T):
 
 @pytest.mark.slow
 @needs_toolchain
+
+def _board_against_model(bdir, path, m, u, y, mode, T, rel, k=None):
+    """Run the record on the board in ``mode`` and check it against the float64 model: within
+    the float32 bound derived in ``_tolerance`` over ``T`` seconds, and within ``rel`` of each
+    state's span. Returns the board's run."""
+    r = fw.run_step_equivalence(bdir, path, u, y, mode, k=k)
+    want = m.predict(u.astype(np.float32).astype(float), y.astype(np.float32).astype(float),
+                     mode=mode, k=k or 1)[m.t0:]
+    err = np.max(np.abs(r["outputs"] - want), axis=0)
+    tol = _tolerance(m, u, np.r_[y, want], T)
+    print(mode, "error / bound per state", np.round(err / tol, 4))
+    assert np.all(err <= tol), (mode, err, tol)
+    span = np.ptp(y.astype(np.float32).astype(float), axis=0)
+    print(mode, "error / span per state", np.round(err / span, 8))
+    assert np.all(err <= rel * span)
+    return r
+
 def test_quad_physics_on_the_board_matches_python(quad, bdir):
     path, U, Y = quad
     m = load_model(path)
@@ -139,16 +156,8 @@ def test_quad_physics_on_the_board_matches_python(quad, bdir):
     assert rep["steps"] == len(u) - m.t0
     dt = float(m.dt)
     for mode, T in (("one_step", dt), ("k_step", 10 * dt), ("free_run", (len(u) - m.t0) * dt)):
-        r = fw.run_step_equivalence(bdir, path, u, y, mode, k=10)
-        want = m.predict(u.astype(np.float32).astype(float),
-                         y.astype(np.float32).astype(float), mode=mode, k=10)[m.t0:]
-        err = np.max(np.abs(r["outputs"] - want), axis=0)
-        tol = _tolerance(m, u, np.r_[y, want], T)
-        print(mode, "error / bound per state", np.round(err / tol, 4))
-        assert np.all(err <= tol), (mode, err, tol)
-        span = np.ptp(y.astype(np.float32).astype(float), axis=0)
-        print(mode, "error / span per state", np.round(err / span, 8))
-        assert np.all(err <= (1e-4 if mode == "free_run" else 1e-5) * span)
+        r = _board_against_model(bdir, path, m, u, y, mode, T,
+                                 1e-4 if mode == "free_run" else 1e-5, k=10)
         if mode == "k_step":   # rows t0 .. t0 + k - 2 have no origin k rows back: measured
             np.testing.assert_array_equal(r["outputs"][:9], y[m.t0:m.t0 + 9].astype(np.float32))
         else:                  # the same float32 operations as a numpy twin of the equations
@@ -219,16 +228,8 @@ def test_nanodrone_flight_model_on_the_board(tmp_path):
     for mode, n in (("one_step", 300), ("free_run", 100)):      # free run: 1 s
         u, y = Ut[:n], Yt[:n]
         T = 0.01 if mode == "one_step" else (n - m.t0) * 0.01
-        r = fw.run_step_equivalence(tmp_path / "b", path, u, y, mode)
-        want = m.predict(u.astype(np.float32).astype(float),
-                         y.astype(np.float32).astype(float), mode=mode)[m.t0:]
-        err = np.max(np.abs(r["outputs"] - want), axis=0)
-        tol = _tolerance(m, u, np.r_[y, want], T)
-        print(mode, "error / bound per state", np.round(err / tol, 4))
-        assert np.all(err <= tol), (mode, err, tol)
-        span = np.ptp(y.astype(np.float32).astype(float), axis=0)
-        print(mode, "error / span per state", np.round(err / span, 8))
-        assert np.all(err <= (1e-5 if mode == "one_step" else 1e-4) * span)
+        r = _board_against_model(tmp_path / "b", path, m, u, y, mode, T,
+                                 1e-5 if mode == "one_step" else 1e-4)
         np.testing.assert_array_equal(r["outputs"], quad_twin32(m, u, y, mode))
 
 

@@ -118,7 +118,6 @@ def iv_fit(fitted: Fit, sig, U, horizon: int, trim: int, rows=None) -> tuple[Fit
     current = fitted
     theta = {p: float(fitted.theta[p]) for p in est}
     info = {"iterations": 0, "converged": False, "idim_ls": dict(theta)}
-    std = {p: float("inf") for p in est}
     for it in range(1, MAX_ITERATIONS + 1):
         sim, covered = _simulated_signals(current, sig, U, horizon, trim)
         r = use & covered
