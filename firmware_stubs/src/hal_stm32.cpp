@@ -23,8 +23,13 @@ constexpr std::uint32_t kApb2Hz = 84000000u;  // PCLK2 at 168 MHz SYSCLK
 volatile std::uint32_t g_millis = 0;
 
 // Receive ring filled by USART1_IRQHandler, emptied by usart1_getc (single producer, single
-// consumer; indices wrap mod 2^32, the size is a power of two).
-constexpr std::uint32_t kRing = 128;
+// consumer; indices wrap mod 2^32, the size is a power of two). 128 bytes; an image that takes
+// more bytes at once (fw_monitor_pil: rows in flight) compiles this file with its own size.
+#ifndef CDAM_FW_UART_RING
+#define CDAM_FW_UART_RING 128
+#endif
+constexpr std::uint32_t kRing = CDAM_FW_UART_RING;
+static_assert((kRing & (kRing - 1)) == 0, "the ring size is a power of two");
 volatile char g_ring[kRing];
 volatile std::uint32_t g_head = 0, g_tail = 0, g_overruns = 0;
 

@@ -1,6 +1,7 @@
 """Firmware side, split by job: the model as the firmware runs it (:mod:`.model`), generated
 headers (:mod:`.export`), the cross build (:mod:`.build`), QEMU runs (:mod:`.qemu`),
-``cdam firmware check`` (:mod:`.check`) and processor in the loop (:mod:`.pil`).
+``cdam firmware check`` (:mod:`.check`), processor in the loop (:mod:`.pil`: the joint loop;
+:mod:`.monitor_pil`: the residual monitor over SLCAN).
 
 The firmware (``firmware_stubs/``) runs the core's own ``cdam::Mlp`` (cpp/include/cdam/mlp.hpp)
 with the fast activation of cdam/fast_math.hpp on the weights of ``generated/model.hpp``.
@@ -19,6 +20,7 @@ from cdam_core.firmware.model import (FirmwareModel, StepFirmwareModel, load_fir
                                       theta_fnv1a)
 from cdam_core.firmware.paths import (ARM_GCC, FIRMWARE_DIR, QEMU, firmware_sources,
                                      missing_tools, toolchain_available)
+from cdam_core.firmware.monitor_pil import monitor_pil
 from cdam_core.firmware.pil import (JointPlant, closed_loop_pil, closed_loop_python,
                                     default_reference, pid_config)
 from cdam_core.firmware.qemu import (run_equivalence, run_kernels, run_optim_host,
@@ -29,7 +31,7 @@ __all__ = [
     "OPTIM_SAMPLES", "OPTIM_SHAPE", "QEMU", "STEP_IMAGES", "StepFirmwareModel", "build", "check",
     "closed_loop_pil", "closed_loop_python", "default_inputs", "default_record",
     "default_reference", "export_header", "export_optim_data", "firmware_sources",
-    "heap_guard_works", "load_firmware_model", "missing_tools", "optim_data", "pid_config",
+    "heap_guard_works", "load_firmware_model", "missing_tools", "monitor_pil", "optim_data", "pid_config",
     "run_equivalence", "run_kernels", "run_optim_host", "run_optim_target", "run_qemu",
     "run_step_equivalence", "theta_fnv1a", "toolchain_available",
 ]

@@ -22,6 +22,9 @@ IMAGES = ("fw_infer", "fw_check", "fw_loop", "fw_kernels", "fw_optim", "fw_check
 STEP_IMAGES = ("fw_step", "fw_step_check")   # the dynamic kinds (arx, hybrid, greybox)
 
 
+MONITOR_PIL_IMAGE = "fw_monitor_pil"   # a model file with a monitor section: the PIL image
+
+
 def build(build_dir, model=None, *, jobs: int = 2, timeout: float = 600.0) -> dict:
     """Cross-build the firmware images into ``build_dir``.
 
@@ -32,7 +35,8 @@ def build(build_dir, model=None, *, jobs: int = 2, timeout: float = 600.0) -> di
     Returns ``{image: {"text", "data", "bss"}}``: for a network fw_infer, fw_check, fw_loop,
     fw_kernels, fw_optim (check 3's IBOA-BP run) and fw_check_exact (fw_check with std::tanh,
     the benchmark's reference); for arx, hybrid and greybox (:data:`STEP_IMAGES`) fw_step
-    (model + one step) and fw_step_check.
+    (model + one step) and fw_step_check, with fw_monitor_pil (the monitor in the loop over
+    SLCAN) when the model file has a monitor section.
     Raises RuntimeError with the compiler output when the build fails (also when something
     uses the heap: the link then fails on ``__wrap_malloc``).
     """
@@ -45,6 +49,8 @@ def build(build_dir, model=None, *, jobs: int = 2, timeout: float = 600.0) -> di
     if model is not None and not isinstance(model, (FirmwareModel, StepFirmwareModel)):
         model = load_firmware_model(model)
     images = STEP_IMAGES if isinstance(model, StepFirmwareModel) else IMAGES
+    if isinstance(model, StepFirmwareModel) and model.monitor is not None:
+        images = images + (MONITOR_PIL_IMAGE,)
     if model is not None:
         model_dir = build_dir / "generated"
         model_dir.mkdir(exist_ok=True)

@@ -5,6 +5,7 @@ import math
 import re
 import struct
 import subprocess
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -137,46 +138,29 @@ def _set_nodelay(bus) -> None:
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
 
 
-def closed_loop_pil(build_dir, duration: float = 2.0, reference=default_reference,
-                    plant: JointPlant | None = None, *, timeout: float | None = None) -> dict:
-    """Check (4): fw_loop.elf under QEMU, the plant in Python, python-can over SLCAN on the
-    emulated USART1 (``-serial tcp:127.0.0.1:PORT,server=on,wait=on``).
+@contextmanager
+def slcan_board(elf, timeout: float):
+    """QEMU running ``elf`` (an SLCAN image: fw_loop, fw_monitor_pil) with its USART1 on a
+    local TCP port, and python-can's ``slcan`` bus opened on it; QEMU ends with the block.
 
-    ``timeout`` (seconds of wall time for QEMU) defaults to 60 + 0.1 s per cycle.
     Both ends of the TCP link run with TCP_NODELAY (QEMU's ``nodelay=on`` and the client
     socket): with Nagle's algorithm each of the many small writes of a cycle waited for a
-    delayed ACK, about 40 ms a write, which made a cycle take about 0.1 s of wall time instead
-    of about 5 ms.
-    Lock-step: each period sends the reference (0x300) and both feedback frames, waits for the
-    0x200 command and the 0x3F0 diagnostic, then advances the plant one period. Returns the
-    same arrays as closed_loop_python plus frames_sent, frames_received, cycles (the
-    firmware's counter) and rejected (frames the firmware refused).
+    delayed ACK, about 40 ms a write. ``timeout``: seconds of wall time for QEMU.
     """
+    import time
+
     import can
-    from cdam_core.record.can.codec import decode_current_command
-    cfg = pid_config()
-    dt, n = cfg["kDt"], int(round(float(duration) / cfg["kDt"]))
-    if n < 1:
-        raise ValueError(f"duration: must be at least one period, got {duration}")
-    plant = plant or JointPlant()
-    if timeout is None:  # about 5 ms of wall time per cycle with TCP_NODELAY
-        timeout = 60.0 + 0.1 * n
-    port = _free_port()
-    elf = Path(build_dir).resolve() / "fw_loop.elf"
+    elf = Path(elf).resolve()
     if not elf.is_file():
-        raise FileNotFoundError(f"build_dir: no fw_loop.elf in {build_dir}")
+        raise FileNotFoundError(f"build_dir: no {elf.name} in {elf.parent}")
+    port = _free_port()
     proc = subprocess.Popen(
         ["timeout", "--kill-after=5", str(float(timeout)), QEMU, "-M", "netduinoplus2",
          "-display", "none", "-monitor", "none",
          "-serial", f"tcp:127.0.0.1:{port},server=on,wait=on,nodelay=on", "-kernel", str(elf)],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    out = {k: [] for k in ("t", "r", "q", "u", "y0")}
-    sent = received = 0
-    cycles = rejected = 0
-    last_ref = None
     bus = None
     try:
-        import time
         deadline = time.monotonic() + 10
         while True:
             try:
@@ -194,6 +178,44 @@ def closed_loop_pil(build_dir, duration: float = 2.0, reference=default_referenc
             if time.monotonic() > deadline or proc.poll() is not None:
                 raise RuntimeError("the firmware does not answer on the SLCAN port")
         bus.open()
+        yield bus
+    finally:
+        if bus is not None:
+            bus.shutdown()
+        if proc.poll() is None:
+            proc.terminate()
+        try:
+            proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+
+
+def closed_loop_pil(build_dir, duration: float = 2.0, reference=default_reference,
+                    plant: JointPlant | None = None, *, timeout: float | None = None) -> dict:
+    """Check (4): fw_loop.elf under QEMU, the plant in Python, python-can over SLCAN on the
+    emulated USART1 (``-serial tcp:127.0.0.1:PORT,server=on,wait=on``).
+
+    ``timeout`` (seconds of wall time for QEMU) defaults to 60 + 0.1 s per cycle.
+    With TCP_NODELAY (:func:`slcan_board`) a cycle takes about 5 ms of wall time instead of
+    about 0.1 s.
+    Lock-step: each period sends the reference (0x300) and both feedback frames, waits for the
+    0x200 command and the 0x3F0 diagnostic, then advances the plant one period. Returns the
+    same arrays as closed_loop_python plus frames_sent, frames_received, cycles (the
+    firmware's counter) and rejected (frames the firmware refused).
+    """
+    from cdam_core.record.can.codec import decode_current_command
+    cfg = pid_config()
+    dt, n = cfg["kDt"], int(round(float(duration) / cfg["kDt"]))
+    if n < 1:
+        raise ValueError(f"duration: must be at least one period, got {duration}")
+    plant = plant or JointPlant()
+    if timeout is None:  # about 5 ms of wall time per cycle with TCP_NODELAY
+        timeout = 60.0 + 0.1 * n
+    out = {k: [] for k in ("t", "r", "q", "u", "y0")}
+    sent = received = 0
+    cycles = rejected = 0
+    last_ref = None
+    with slcan_board(Path(build_dir) / "fw_loop.elf", timeout) as bus:
         for k in range(n):
             t = k * dt
             r = np.asarray(reference(t), dtype=float)
@@ -224,15 +246,6 @@ def closed_loop_pil(build_dir, duration: float = 2.0, reference=default_referenc
             out["u"].append(counts)
             out["y0"].append(y0)
             plant.step(counts, dt)
-    finally:
-        if bus is not None:
-            bus.shutdown()
-        if proc.poll() is None:
-            proc.terminate()
-        try:
-            proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
     res = {k: np.asarray(v) for k, v in out.items()}
     res.update(frames_sent=sent, frames_received=received, cycles=cycles, rejected=rejected)
     return res

@@ -84,6 +84,22 @@ MODES = {"one_step": 0, "free_run": 1, "k_step": None}   # k_step: the header ca
 MAX_K = 64    # the longest k-step horizon of fw_step_check (kMaxK there)
 
 
+def step_record(fm: StepFirmwareModel, U, Y) -> tuple[np.ndarray, np.ndarray]:
+    """(U, Y) as float64 arrays after the checks a record for a dynamic kind needs: shapes
+    (N, inputs) and (N, outputs), finite, the same N and more than the model's t0 rows."""
+    U = np.asarray(U, dtype=np.float64)
+    Y = np.asarray(Y, dtype=np.float64)
+    for name, a, w in (("U", U, fm.n_inputs), ("Y", Y, fm.n_outputs)):
+        if a.ndim != 2 or a.shape[1] != w:
+            raise ValueError(f"{name}: expected shape (N, {w}), got {a.shape}")
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"{name}: contains NaN or Inf")
+    if U.shape[0] != Y.shape[0] or U.shape[0] <= fm.history:
+        raise ValueError(f"U, Y: need the same number of rows, more than {fm.history}; got "
+                         f"{U.shape[0]} and {Y.shape[0]}")
+    return U, Y
+
+
 def run_step_equivalence(build_dir, model, U, Y, mode: str = "one_step", *,
                          timeout: float = 60.0, k: int | None = None) -> dict:
     """The dynamic kinds (arx, hybrid, greybox): fw_step_check.elf runs the record (U (N, I),
@@ -109,16 +125,7 @@ def run_step_equivalence(build_dir, model, U, Y, mode: str = "one_step", *,
         code = int(k) if k > 1 else MODES["one_step"]
     else:
         code = MODES[mode]
-    U = np.asarray(U, dtype=np.float64)
-    Y = np.asarray(Y, dtype=np.float64)
-    for name, a, w in (("U", U, fm.n_inputs), ("Y", Y, fm.n_outputs)):
-        if a.ndim != 2 or a.shape[1] != w:
-            raise ValueError(f"{name}: expected shape (N, {w}), got {a.shape}")
-        if not np.all(np.isfinite(a)):
-            raise ValueError(f"{name}: contains NaN or Inf")
-    if U.shape[0] != Y.shape[0] or U.shape[0] <= fm.history:
-        raise ValueError(f"U, Y: need the same number of rows, more than {fm.history}; got "
-                         f"{U.shape[0]} and {Y.shape[0]}")
+    U, Y = step_record(fm, U, Y)
     U32, Y32 = U.astype(np.float32), Y.astype(np.float32)
     with tempfile.TemporaryDirectory(prefix="cdam_fw_") as tmp:
         with open(Path(tmp) / "fw_step_in.bin", "wb") as f:
