@@ -69,40 +69,107 @@ def _nanodrone_model(tmp: Path) -> dict:
     return {"quad_physics_nanodrone": tmp / "nano.json"}
 
 
-def bench_kinds() -> dict:
+def _models(tmp: Path, network: dict) -> dict:
+    """One model file of each kind (``network``: the bp_network entry), written into tmp."""
+    k = _builders()
+    return {**network, **_emps_models(tmp),
+            "arx_physics": k.arx_file(tmp / "arxp.json", physics=True),
+            "hybrid": k.hybrid_file(tmp / "hybrid.json")[0],
+            "greybox_rigid_4_effects": k.greybox_file(tmp / "rigid.json"),
+            "greybox_flexible_6_effects": k.flexible_file(tmp / "flex.json"),
+            "greybox_quadrotor_4_effects": k.quadrotor_file(tmp / "quad.json"),
+            "greybox_aerial_manipulator_6_effects": k.aerial_file(tmp / "aerial.json"),
+            "quad_physics_lag_damping_reaction": k.quad_physics_file(tmp / "quad_physics.json")[0],
+            **_nanodrone_model(tmp)}
+
+
+def _each_kind(network, measure, total: str, label: str) -> dict:
+    """``measure(tmp, name, path)`` on one model of each kind (``network(tmp)``: the bp_network
+    entry); prints each and returns the headroom at 1 kHz over the largest ``total``."""
     if fw.toolchain_available():
         return {}
-    k = _builders()
     t0 = time.perf_counter()
     out = {}
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        models = {"bp_network_demo": fw.FIRMWARE_DIR / "generated" / "demo_model.json",
-                  **_emps_models(tmp),
-                  "arx_physics": k.arx_file(tmp / "arxp.json", physics=True),
-                  "hybrid": k.hybrid_file(tmp / "hybrid.json")[0],
-                  "greybox_rigid_4_effects": k.greybox_file(tmp / "rigid.json"),
-                  "greybox_flexible_6_effects": k.flexible_file(tmp / "flex.json"),
-                  "greybox_quadrotor_4_effects": k.quadrotor_file(tmp / "quad.json"),
-                  "greybox_aerial_manipulator_6_effects": k.aerial_file(tmp / "aerial.json"),
-                  "quad_physics_lag_damping_reaction":
-                      k.quad_physics_file(tmp / "quad_physics.json")[0],
-                  **_nanodrone_model(tmp)}
-        for name, path in models.items():
-            rep = fw.check(path, build_dir=tmp / f"b_{name}")
-            ips = rep.get("instructions_per_step", rep.get("instructions_per_prediction"))
-            out[name] = {"instructions": ips, "us_168mhz": rep["microseconds_168mhz"],
-                         "flash": rep["flash_bytes"], "static_ram": rep["static_ram_bytes"],
-                         "error_one_step": rep.get("max_rel_error", rep["max_abs_error"]),
-                         "error_k_step": rep.get("max_rel_error_k_step"),
-                         "error_free_run": rep.get("max_rel_error_free_run"),
-                         "heap_free": rep["heap_free"]}
+        for name, path in _models(tmp, network(tmp)).items():
+            out[name] = measure(tmp, name, path)
     secs = time.perf_counter() - t0
     for name, r in out.items():
-        print(f"firmware {name}: " + ", ".join(f"{a}={b}" for a, b in r.items()))
-    worst = max(r["instructions"] for r in out.values())
+        print(f"{label} {name}: " + ", ".join(f"{a}={b}" for a, b in r.items()))
+    worst = max(r[total] for r in out.values())
     return {"ratio": BUDGET_CYCLES / worst, "seconds": secs, "worst_instructions": worst,
-            **{f"{n}_instructions": r["instructions"] for n, r in out.items()}}
+            **{f"{n}_instructions": r[total] for n, r in out.items()}}
 
 
-BENCHMARKS = {"firmware_kinds": bench_kinds}
+def _check_figures(tmp, name, path) -> dict:
+    rep = fw.check(path, build_dir=tmp / f"b_{name}")
+    ips = rep.get("instructions_per_step", rep.get("instructions_per_prediction"))
+    return {"instructions": ips, "us_168mhz": rep["microseconds_168mhz"],
+            "flash": rep["flash_bytes"], "static_ram": rep["static_ram_bytes"],
+            "error_one_step": rep.get("max_rel_error", rep["max_abs_error"]),
+            "error_k_step": rep.get("max_rel_error_k_step"),
+            "error_free_run": rep.get("max_rel_error_free_run"),
+            "heap_free": rep["heap_free"]}
+
+
+def bench_kinds() -> dict:
+    return _each_kind(lambda tmp: {"bp_network_demo":
+                                   fw.FIRMWARE_DIR / "generated" / "demo_model.json"},
+                      _check_figures, "instructions", "firmware")
+
+
+def _with_monitor(path, out, seed: int = 0):
+    """The model file of ``path`` with a monitor section calibrated on its default record (the
+    free run of cdam firmware check's synthetic input) plus white noise of 1e-3 of each
+    output's span (seeded), so that the residual has a spread to normalise by."""
+    import numpy as np
+    from cdam_core.evaluate.monitor import calibrate
+    from cdam_core.models.file import read_model_file, save_model
+    mf = read_model_file(path)
+    fm = fw.load_firmware_model(path)
+    U, Y = fw.default_record(fm, n=2000)
+    Y = Y + 1e-3 * np.ptp(Y, axis=0) * np.random.default_rng(seed).standard_normal(Y.shape)
+    dt = float(getattr(mf.model, "dt", None) or 1e-3)
+    save_model(out, mf.model, inputs=mf.inputs, outputs=mf.outputs,
+               smoothing_passes=mf.smoothing_passes, meta=mf.meta,
+               monitor=calibrate(mf.model, U, Y, dt, paths=100, seed=seed))
+    return out
+
+
+def _narx_network(path):
+    """A NARX bp_network (2, 2, 1), 2 inputs, 2 outputs, 8 hidden units, on a damped linear
+    plant driven by held random levels (seeded)."""
+    import numpy as np
+    from cdam_core.models import BPNetwork, save_model
+    rng = np.random.default_rng(1)
+    U = np.repeat(rng.uniform(-1, 1, (20, 2)), 100, axis=0)
+    Y = np.zeros((2000, 2))
+    for t in range(2, 2000):
+        Y[t, 0] = 1.6 * Y[t - 1, 0] - 0.64 * Y[t - 2, 0] + 0.04 * U[t - 1, 0]
+        Y[t, 1] = 0.9 * Y[t - 1, 1] + 0.05 * Y[t - 1, 0] + 0.1 * U[t - 1, 1]
+    save_model(path, BPNetwork(hidden=8, narx=(2, 2, 1), epochs=50).fit(U, Y),
+               inputs=["u0", "u1"], outputs=["y0", "y1"])
+    return path
+
+
+def _monitor_figures(tmp, name, path) -> dict:
+    rep = fw.check(_with_monitor(path, tmp / f"{name}_monitor.json"),
+                   build_dir=tmp / f"b_{name}", k=2)
+    step, upd = rep["instructions_per_step"], rep["instructions_per_monitor"]
+    return {"step": step, "monitor": upd, "total": round(step + upd, 1),
+            "us_168mhz": round((step + upd) / 168, 2),
+            "flash": rep["flash_bytes"], "static_ram": rep["static_ram_bytes"],
+            "monitor_mismatches": rep["monitor_mismatches"],
+            "error_one_step": rep["max_rel_error"]}
+
+
+def bench_kinds_monitor() -> dict:
+    """Every kind that reaches the board with its residual monitor: the model's step plus the
+    monitor's update per sample (instructions, microseconds at 168 MHz), fw_step's flash and
+    static RAM with the monitor, and the monitor's decisions against Python's (mismatches)."""
+    return _each_kind(lambda tmp: {"bp_network_narx_8_hidden": _narx_network(tmp / "net.json")},
+                      _monitor_figures, "total", "firmware+monitor")
+
+
+BENCHMARKS = {"firmware_kinds": bench_kinds, "firmware_kinds_monitor": bench_kinds_monitor}

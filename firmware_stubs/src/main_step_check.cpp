@@ -30,6 +30,11 @@ namespace {
 
 using fw::ticks::elapsed;
 
+#ifndef CDAM_MODEL_STATIC
+#define CDAM_MODEL_STATIC 0
+#endif
+constexpr bool kStaticMap = CDAM_MODEL_STATIC != 0;
+
 fw::StepModel g_model;
 constexpr int kMaxK = 64;                  // the longest k-step horizon
 fw::StepModel g_scratch;                   // k-step: the model run ahead from g_model
@@ -91,7 +96,9 @@ int main() {
   std::int32_t head[2];
   if (sh::read(in, head, sizeof head) != sizeof head) return 3;
   if (head[0] < fw::kT0 || head[1] < 0 || head[1] > kMaxK) return 4;
-  const int k_ahead = head[1] >= 2 ? head[1] : 0;
+  // a static map (CDAM_MODEL_STATIC: a network without NARX orders) has no k-step of its own:
+  // its k-step prediction is the one of every row, as in Python
+  const int k_ahead = head[1] >= 2 && !kStaticMap ? head[1] : 0;
   std::uint32_t steps = 0, timed = 0, max_ticks = 0;
   std::uint64_t total_ticks = 0;
   float row[fw::kU + fw::kY], y[fw::kY];

@@ -1,7 +1,8 @@
 // The dynamic model kinds on the target, one sample at a time: `arx`, `hybrid` (ARX + a static
 // network on its residual), `greybox` (a declared model plus the effects the residual loop
-// found, integrated as cdam_core.models.greybox.augmented.GreyBox does) and `quad_physics` (the
-// flight model's rigid body, RK4 per sample: fw/quad_physics_step.hpp). The numbers come from
+// found, integrated as cdam_core.models.greybox.augmented.GreyBox does), `quad_physics` (the
+// flight model's rigid body, RK4 per sample: fw/quad_physics_step.hpp) and, kind 5, a
+// `bp_network` whose model file has a monitor section (NARX or static, beside its monitor). The numbers come from
 // generated/model.hpp (`cdam export-firmware`); the structure (which effect, which declared
 // model) is an integer code there, never a name. Fixed sizes, no heap; libm only for tanhf (a
 // smoothed Coulomb friction), sinf and cosf (gravity, payload and attitude terms).
@@ -21,7 +22,7 @@
 
 #include "model.hpp"
 
-#if CDAM_MODEL_KIND == 2 && CDAM_MODEL_HAS_NET
+#if (CDAM_MODEL_KIND == 2 && CDAM_MODEL_HAS_NET) || CDAM_MODEL_KIND == 5
 #include "cdam/fast_math.hpp"
 #include "cdam/mlp.hpp"
 #include "cdam/scaling.hpp"
@@ -479,6 +480,72 @@ inline std::uint32_t params_fnv1a() {
   std::uint32_t h = fnv1a_floats(0x811C9DC5u, cdam_model::kBase, sizeof(cdam_model::kBase) / 4);
   h = fnv1a_floats(h, cdam_model::kInertia, sizeof(cdam_model::kInertia) / 4);
   return fnv1a_floats(h, cdam_model::kEffectParam, sizeof(cdam_model::kEffectParam) / 4);
+}
+
+#elif CDAM_MODEL_KIND == 5
+
+// A bp_network one sample at a time (cdam_core.models.network.BPNetwork with a monitor
+// section; a static network is na = 0, nb = 1, nk = 0): the regressor [y(t-1); ...; y(t-na);
+// u(t-nk); ...; u(t-nk-nb+1)] in cdam/narx.hpp's order, min-max scaled per element (the
+// output scaler's numbers for past outputs, the input scaler's for inputs), cdam::Mlp with the
+// fast activation, back-scaled by the output scaler.
+class StepModel {
+ public:
+  static constexpr int kNa = cdam_model::kNa, kNb = cdam_model::kNb, kNk = cdam_model::kNk;
+  static constexpr int kYRows = kNa > 0 ? kNa : 1;
+  static constexpr int kURows = kNk + kNb > 0 ? kNk + kNb : 1;   // u(t) .. u(t-nk-nb+1)
+  static constexpr int kIn = cdam_model::kNetInputs, kHidden = cdam_model::kNetHidden;
+  static_assert(kIn == kNa * kY + kNb * kU, "the network's inputs are the regressor");
+
+  void prime(const float* u, const float* y) {
+    push_input(u);
+    push_output(y);
+  }
+
+  void step(const float* u, float* y) {
+    using Net = cdam::Mlp<float, kIn, kHidden, kY, cdam::FastActivation>;
+    using namespace cdam_model;
+    push_input(u);
+    const Net net(kIn, kHidden, kY, kNetTansig ? cdam::Activation::Tansig
+                                               : cdam::Activation::Logsig);
+    float x[kIn], hidden[kHidden], yn[kY];
+    int p = 0;
+    for (int j = 0; j < kNa; ++j)
+      for (int c = 0; c < kY; ++c, ++p)
+        x[p] = cdam::minmax_forward(y_[j][c], kNetXMin[p], kNetXMax[p]);
+    for (int j = 0; j < kNb; ++j)
+      for (int c = 0; c < kU; ++c, ++p)
+        x[p] = cdam::minmax_forward(u_[kNk + j][c], kNetXMin[p], kNetXMax[p]);
+    net.forward(kNetTheta, x, hidden, yn);
+    for (int k = 0; k < kY; ++k) y[k] = cdam::minmax_inverse(yn[k], kNetYMin[k], kNetYMax[k]);
+    push_output(y);
+  }
+
+  void correct(const float* y) {
+    if (kNa > 0)
+      for (int c = 0; c < kY; ++c) y_[0][c] = y[c];
+  }
+
+ private:
+  void push_input(const float* u) {
+    for (int j = kURows - 1; j > 0; --j)
+      for (int c = 0; c < kU; ++c) u_[j][c] = u_[j - 1][c];
+    for (int c = 0; c < kU; ++c) u_[0][c] = u[c];
+  }
+
+  void push_output(const float* y) {
+    if (kNa == 0) return;
+    for (int j = kYRows - 1; j > 0; --j)
+      for (int c = 0; c < kY; ++c) y_[j][c] = y_[j - 1][c];
+    for (int c = 0; c < kY; ++c) y_[0][c] = y[c];
+  }
+
+  float y_[kYRows][kY] = {};
+  float u_[kURows][kU] = {};
+};
+
+inline std::uint32_t params_fnv1a() {
+  return fnv1a_floats(0x811C9DC5u, cdam_model::kNetTheta, sizeof(cdam_model::kNetTheta) / 4);
 }
 
 #endif

@@ -50,6 +50,9 @@ def _input_range(fm: StepFirmwareModel):
                                                                     par[code == 7, 1]))
         amp = 4.0 * static + 1.0
         return np.full(n, -amp), np.full(n, amp)
+    if fm.kind == "bp_network":   # the network's training range of the inputs (lag nk)
+        a0 = i["kNa"] * fm.n_outputs
+        return np.asarray(a["kNetXMin"][a0:a0 + n]), np.asarray(a["kNetXMax"][a0:a0 + n])
     if i["kPhysics"]:   # motor commands, 0 .. their training maximum
         return np.zeros(n), np.asarray(a["kFeatureScale"], np.float64)
     if "kNetXMin" in a:   # raw inputs: the residual network's training range of lag 0

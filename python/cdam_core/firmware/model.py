@@ -70,7 +70,8 @@ def _minmax(X, lo, hi):
 
 def load_firmware_model(path) -> FirmwareModel | StepFirmwareModel:
     """Read a model file into what the firmware runs: a FirmwareModel for ``bp_network``, a
-    StepFirmwareModel for ``arx``, ``hybrid`` and ``greybox``.
+    StepFirmwareModel for ``arx``, ``hybrid``, ``greybox``, ``quad_physics`` and a
+    ``bp_network`` with a monitor section (run one sample at a time beside its monitor).
 
     Raises FileNotFoundError for a missing file and ValueError for a corrupt or inconsistent
     one, or for a model (a grey-box model's declared model or effect) the firmware cannot run.
@@ -79,8 +80,8 @@ def load_firmware_model(path) -> FirmwareModel | StepFirmwareModel:
     if not path.is_file():
         raise FileNotFoundError(f"MODEL: no such file: {path}")
     mf = read_model_file(path)
-    if mf.kind != "bp_network":
-        try:
+    if mf.kind != "bp_network" or mf.monitor is not None:   # a monitored network: one sample
+        try:                                                   # at a time, beside its monitor
             return step_model(mf, str(path))
         except ValueError as exc:
             raise ValueError(f"{exc} ({path})") from None

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from cdam_core.base.orders import parse_orders
 from cdam_core.firmware.numbers import c_array, c_float, c_int_array, finite32, theta_fnv1a
 
 KIND_CODES = {"bp_network": 0, "arx": 1, "hybrid": 2, "greybox": 3, "quad_physics": 4}
@@ -25,6 +26,7 @@ DECLARED_CODES = {"rigid_axis": 0, "flexible_joint": 1, "quadrotor": 2, "aerial_
 EFFECT_CODES = {"coulomb_friction": 1, "asymmetric_friction": 2, "external_force": 3,
                 "actuator_delay": 4, "backlash": 5, "hardening_stiffness": 6, "payload_mass": 7,
                 "ground_effect": 8, "thrust_loss": 9}
+NETWORK_STEP_CODE = 5      # a bp_network one sample at a time (with its monitor): CDAM_MODEL_KIND
 G0 = 9.81   # cdam_core.models.greybox.effects.G0 and flight.G0 (the firmware's kG0), tested
 MAX_DELAY_ROWS = 1024      # input rows kept for an actuator delay (4 KB of RAM per input)
 MAX_COEFS = 100_000        # ARX rows x outputs, network weights (above the M4F's flash)
@@ -84,6 +86,9 @@ class StepFirmwareModel:
             feats = "physics" if i["kPhysics"] else "raw"
             return (f"{self.kind} ({i['kNa']}, {i['kNb']}, {i['kNk']}) on {feats} features, "
                     f"{self.n_inputs} in, {self.n_outputs} out{net}")
+        if self.kind == "bp_network":
+            return (f"bp_network {i['kNetInputs']}-{i['kNetHidden']}-{self.n_outputs}, NARX "
+                    f"({i['kNa']}, {i['kNb']}, {i['kNk']}), one sample at a time")
         if self.kind == "quad_physics":
             return (f"quad_physics, 13 states, rates {'dynamic' if i['kRatesDynamic'] else 'held'}"
                     f", {i['kKernel']}-tap actuation lag, delays {i['kDelayTrans']}/"
@@ -121,6 +126,8 @@ def step_model(mf, source: str = "") -> StepFirmwareModel:
         fm = _greybox(mf)
     elif mf.kind == "quad_physics":
         fm = _quad_physics(mf)
+    elif mf.kind == "bp_network":
+        fm = _network(mf)
     else:
         raise ValueError(f"MODEL: a {mf.kind!r} model cannot run on the firmware")
     fm.source = str(source)
@@ -181,6 +188,36 @@ def _arx(mf) -> StepFirmwareModel:
                           "kNetYMin": net.scaler_y_.data_min_,
                           "kNetYMax": net.scaler_y_.data_max_})
         fm.hashed = ("kCoef", "kNetTheta")
+    return fm
+
+
+def _network(mf) -> StepFirmwareModel:
+    """A bp_network one sample at a time (fw::StepModel of kind NETWORK_STEP_CODE): NARX
+    orders (a static network: na 0, nb 1, nk 0), the weights, one pair of scaling numbers per
+    regressor element (the output scaler's for past outputs, the input scaler's for inputs)."""
+    net = mf.model
+    if net.activation not in ("tansig", "logsig"):
+        raise ValueError(f"MODEL: model.activation {net.activation!r} is not supported")
+    na, nb, nk = (0, 1, 0) if net.narx is None else (int(v) for v in parse_orders(net.narx))
+    ni, m, h = len(mf.inputs), int(net.n_outputs_), int(net.hidden_)
+    theta = np.asarray(net.theta_, np.float64)
+    n_in = na * m + nb * ni
+    if theta.shape != (n_in * h + h + h * m + m,) or theta.size > MAX_COEFS:
+        raise ValueError(f"MODEL: model.theta: {theta.size} weights do not fit a {n_in}-{h}-{m} "
+                         f"network on the firmware (at most {MAX_COEFS})")
+    xs, ys = net.scaler_x_, net.scaler_y_
+    fm = StepFirmwareModel(
+        mf.kind, net, list(mf.inputs), list(mf.outputs), int(net.t0), mf.sha256,
+        ints={"kKind": NETWORK_STEP_CODE, "kInputs": ni, "kOutputs": m, "kHistory": int(net.t0),
+              "kNa": na, "kNb": nb, "kNk": nk, "kNetInputs": n_in, "kNetHidden": h,
+              "kNetTansig": net.activation == "tansig"},
+        macros={"CDAM_MODEL_KIND": NETWORK_STEP_CODE, "CDAM_MODEL_STATIC": int(net.narx is None)},
+        hashed=("kNetTheta",))
+    fm.arrays.update({
+        "kNetTheta": theta,
+        "kNetXMin": np.concatenate([ys.data_min_] * na + [xs.data_min_] * nb),
+        "kNetXMax": np.concatenate([ys.data_max_] * na + [xs.data_max_] * nb),
+        "kNetYMin": ys.data_min_, "kNetYMax": ys.data_max_})
     return fm
 
 
