@@ -126,9 +126,10 @@ def _with_monitor(path, out, seed: int = 0):
     import numpy as np
     from cdam_core.evaluate.monitor import calibrate
     from cdam_core.models.file import read_model_file, save_model
+    from cdam_core.firmware.step import step_model
     mf = read_model_file(path)
-    fm = fw.load_firmware_model(path)
-    U, Y = fw.default_record(fm, n=2000)
+    fm = step_model(mf)            # a network too: one sample at a time, as with a monitor
+    U, Y = fw.default_record(fm)   # 1,000 rows, as the check (longer: an unstable mode grows)
     Y = Y + 1e-3 * np.ptp(Y, axis=0) * np.random.default_rng(seed).standard_normal(Y.shape)
     dt = float(getattr(mf.model, "dt", None) or 1e-3)
     save_model(out, mf.model, inputs=mf.inputs, outputs=mf.outputs,

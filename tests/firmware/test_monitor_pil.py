@@ -108,8 +108,9 @@ def test_row_frames_and_flow_control():
     for values in (2, 4, 5, 17, 64):
         frames_per_row = (values + 1) // 2
         w = rows_in_flight(values)
-        assert w >= 1 and (w == 1 or w * frames_per_row * 22 <= ring_bytes())
-        assert (w + 1) * frames_per_row * 22 > ring_bytes()
+        # room for the rows and the host's ack request ("r3F38\r": 6 bytes)
+        assert w >= 1 and (w == 1 or w * frames_per_row * 22 + 6 <= ring_bytes())
+        assert (w + 1) * frames_per_row * 22 + 6 > ring_bytes() - 2
 
 
 def test_bad_input_is_refused_by_name(tmp_path):
@@ -129,3 +130,36 @@ def test_bad_input_is_refused_by_name(tmp_path):
         monitor_pil(tmp_path, tmp_path / "mm.json", U, Y)
     with pytest.raises(FileNotFoundError, match="fw_monitor_pil.elf"):
         monitor_pil(tmp_path, tmp_path / "mm.json", U, np.nan_to_num(Y))
+
+
+@pytest.mark.slow
+@needs_toolchain
+def test_pil_counts_foreign_frames_and_rejects_a_row_not_finite(board):
+    """Raw frames on the bus: a foreign id and a short row frame are ignored and counted, a row
+    with a NaN is taken but not run (status 2, acknowledged at once), and a remote frame 0x3F3
+    asks for an ack."""
+    import can
+    from cdam_core.firmware.monitor_pil import ACK_ID, ROW_REJECTED
+    from cdam_core.firmware.pil import slcan_board
+    _, bdir = board
+
+    def ack(bus):
+        while True:
+            msg = bus.recv(timeout=5.0)
+            assert msg is not None
+            if msg.arbitration_id == ACK_ID:
+                return np.frombuffer(bytes(msg.data)[:4], "<u4")[0], msg.data[4], \
+                    int.from_bytes(bytes(msg.data)[6:8], "little")
+
+    with slcan_board(bdir / "fw_monitor_pil.elf", 60) as bus:
+        bus.send(can.Message(arbitration_id=0x123, is_extended_id=False, data=b"\0" * 8))
+        bus.send(can.Message(arbitration_id=ROW_ID, is_extended_id=False, data=b"\0" * 4))
+        for msg in row_frames([0.1, 0.2], [np.nan, 0.0]):
+            bus.send(msg)
+        assert ack(bus) == (1, ROW_REJECTED, 2)
+        for msg in row_frames([0.1, 0.2], [0.0, 0.0]):       # a history row: acknowledged
+            bus.send(msg)
+        assert ack(bus) == (2, ROW_HISTORY, 2)
+        bus.send(can.Message(arbitration_id=ACK_ID, is_extended_id=False, is_remote_frame=True,
+                             dlc=8))
+        assert ack(bus) == (2, ROW_HISTORY, 2)
