@@ -38,9 +38,17 @@ def _int(text, name):
     return int(re.search(rf"constexpr int {name} = (-?\d+);", text).group(1))
 
 
+@pytest.fixture(scope="module")
+def network_files(tmp_path_factory):
+    """The NARX and the static network with their monitor sections, written once."""
+    d = tmp_path_factory.mktemp("nets")
+    return {narx: _network_file(d / f"n{k}.json", narx) for k, narx in
+            enumerate([(2, 2, 1), None])}
+
+
 @pytest.mark.parametrize("narx", [(2, 2, 1), None])
-def test_header_holds_the_file_numbers(tmp_path, narx):
-    path = _network_file(tmp_path / "n.json", narx)
+def test_header_holds_the_file_numbers(tmp_path, network_files, narx):
+    path = network_files[narx]
     doc = json.loads(path.read_text())
     text = fw.export_header(path, tmp_path / "model.hpp").read_text()
     assert "#define CDAM_MODEL_KIND 5" in text and "#define CDAM_MODEL_HAS_MONITOR 1" in text
@@ -86,8 +94,8 @@ def _twin32(text, U, Y):
 
 
 @pytest.mark.parametrize("narx", [(2, 2, 1), None])
-def test_float32_twin_of_the_step_is_the_python_model(tmp_path, narx):
-    path = _network_file(tmp_path / "n.json", narx)
+def test_float32_twin_of_the_step_is_the_python_model(tmp_path, network_files, narx):
+    path = network_files[narx]
     text = fw.export_header(path, tmp_path / "model.hpp").read_text()
     fm = fw.load_firmware_model(path)
     U, Y = plant(400, seed=3)
@@ -104,9 +112,9 @@ def test_float32_twin_of_the_step_is_the_python_model(tmp_path, narx):
 @pytest.mark.skipif(fw.toolchain_available() is not None,
                     reason=f"firmware toolchain: {fw.toolchain_available()}")
 @pytest.mark.parametrize("narx", [(2, 2, 1), None])
-def test_network_and_monitor_on_the_board(tmp_path, narx):
+def test_network_and_monitor_on_the_board(tmp_path, network_files, narx):
     from cdam_core.firmware.monitor_pil import monitor_pil
-    path = _network_file(tmp_path / "n.json", narx)
+    path = network_files[narx]
     sizes = fw.build(tmp_path / "b", path)
     U, Y = plant(3000, seed=12, effect="bias", onset_s=1.5)
     Y[1500:, 0] += 0.0 if narx else 0.3      # a static map sees a sensor offset, not the force
