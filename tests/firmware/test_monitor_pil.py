@@ -4,7 +4,11 @@ tests/evaluate/_monitor_plant.py, 1 kHz), runs the model beside it and sends an 
 (0x3F2) naming the output. Three effects switching on at t = 10 s are alarmed within 0.5 s, 60 s
 without an effect raise no alarm, and `cdam monitor MODEL RECORD` takes the firmware's decisions
 sample for sample. The QEMU runs are slow (about 4 ms of wall time a row on two shared cores:
-the 60 s record takes about 4 minutes), so they are marked slow (CI runs them once)."""
+the 60 s record takes about 4-6 minutes), so the three effects are marked slow (CI runs them
+once, about 1.5 minutes) and the 60 s soak is marked soak (run by hand: ``pytest -m soak
+tests/firmware``; measured: 60,000 rows, no alarm, 351 s at load 8-18). CI still covers the 60 s
+claim: the board's decisions equal `cdam monitor`'s row for row here, and `cdam monitor` raises
+no alarm in 60 s of the same plant (tests/evaluate/test_monitor.py)."""
 import json
 import sys
 from pathlib import Path
@@ -89,7 +93,7 @@ def test_pil_alarms_an_effect_within_half_a_second(board, tmp_path, effect):
     assert onset <= first[0] <= onset + int(round(0.5 / DT))      # none before, within 0.5 s
 
 
-@pytest.mark.slow
+@pytest.mark.soak
 @needs_toolchain
 def test_pil_60_s_without_an_effect_raise_no_alarm(board, tmp_path):
     U, Y = plant(60_000, seed=2)
