@@ -57,10 +57,13 @@ def test_emps_notebook_runs_from_file_to_report(tmp_path, monkeypatch):
     assert "24841 samples at 1000 Hz" in text                # the record, read from data/
     found = re.findall(r"found (\w+) on tau", text)
     assert found[:1] == ["coulomb_friction"], text
+    # M within 1 %; Fc within 2.5 %: the data choose a zero-order hold, which moves Fc by
+    # -2 % from the published value (computed at the sample instant; tests/residual/test_emps)
+    assert "input timing: held" in text
     for name, value in PUBLISHED.items():
         key = "M" if name == "M" else r"coulomb_friction@tau\.Fc"
         got = float(re.search(rf"^{key} +([-\d.e+]+)", text, re.M).group(1))
-        assert abs(got - value) < 0.01 * value, (name, got)
+        assert abs(got - value) < (0.01 if name == "M" else 0.025) * value, (name, got)
     # the figures were drawn (inline PNGs) and the report written beside data/
     pngs = [o for c in nb.cells for o in c.get("outputs", []) if "image/png" in o.get("data", {})]
     assert len(pngs) >= 2

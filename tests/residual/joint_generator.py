@@ -1,7 +1,8 @@
 """A flexible-joint and rigid-axis data generator independent of ``cdam_core.sim``.
 
 Plain numpy with its own integrator (classical RK4 on a fine grid, the torque held over each
-sample as a DAC holds it), and conditions the project's simulator does not have: a joint in a
+sample as a DAC holds it, or with ``hold=False`` a continuous open-loop torque that the record
+samples at each instant, as a measured current would be), and conditions the project's simulator does not have: a joint in a
 horizontal or a vertical plane, open-loop torque or a PD position loop closed on the *measured*
 motor or link angle (so the torque is correlated with the measurement noise), coarse and noisy
 encoders, sampling from 250 Hz to 1 kHz, a timing skew between the two encoders, motor-side dry
@@ -41,6 +42,7 @@ class Joint:
     K3: float = 0.0                 # hardening cable, N m / rad^3
     periodic: tuple = ()            # (amplitude N m, frequency Hz) on the link
     substeps: int = 4
+    hold: bool = True               # False (open loop only): a continuous torque, sampled
     seed: int = 0
     params: dict = field(default_factory=lambda: dict(TRUTH))
 
@@ -69,6 +71,8 @@ class Joint:
         return x + rng.normal(0.0, noise) if noise else x
 
     def record(self) -> dict:
+        if not self.hold and self.control != "open":
+            raise ValueError("hold=False: only an open-loop torque is continuous")
         rng = np.random.default_rng(self.seed)
         dt = 1.0 / self.fs
         n = int(round(self.duration * self.fs))
@@ -101,10 +105,16 @@ class Joint:
             tau[k] = u
             for j in range(self.substeps):
                 tk = k * dt + j * h
-                k1 = self._deriv(x, u, tk)
-                k2 = self._deriv([a + 0.5 * h * b for a, b in zip(x, k1)], u, tk + 0.5 * h)
-                k3 = self._deriv([a + 0.5 * h * b for a, b in zip(x, k2)], u, tk + 0.5 * h)
-                k4 = self._deriv([a + h * b for a, b in zip(x, k3)], u, tk + h)
+                if self.hold:
+                    u0 = um = u1 = u
+                else:   # the torque itself is continuous; the record samples it at t_k
+                    u0, um, u1 = (0.6 * float(np.sum(np.sin(2 * np.pi * freqs * tt + ph)
+                                                     / (1 + freqs)))
+                                  for tt in (tk, tk + 0.5 * h, tk + h))
+                k1 = self._deriv(x, u0, tk)
+                k2 = self._deriv([a + 0.5 * h * b for a, b in zip(x, k1)], um, tk + 0.5 * h)
+                k3 = self._deriv([a + 0.5 * h * b for a, b in zip(x, k2)], um, tk + 0.5 * h)
+                k4 = self._deriv([a + h * b for a, b in zip(x, k3)], u1, tk + h)
                 x = [a + h / 6.0 * (b1 + 2 * b2 + 2 * b3 + b4)
                      for a, b1, b2, b3, b4 in zip(x, k1, k2, k3, k4)]
                 hist_q.append(x[1])

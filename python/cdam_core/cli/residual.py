@@ -96,7 +96,8 @@ def run(args) -> int:
                               f"effects on {len(ds)} samples"):
         sel = analyse(args.model, ds.t, signals, extra=extra or None, cutoff_hz=args.cutoff,
                       alpha=args.alpha, free_run=not args.no_free_run, fixed=fixed or None,
-                      declared=declared, keep_terms=terms, output_error=args.output_error)
+                      declared=declared, keep_terms=terms, output_error=args.output_error,
+                      timing=args.timing)
     js = to_json(sel)
     js["source"] = str(args.data)
     js["declared_effects"] = declared
@@ -218,6 +219,11 @@ def register(subparsers) -> None:
                         "flexible_joint choose one per position from the record, where its "
                         "spectrum meets the encoder noise; the flight models use 2 Hz for the "
                         "body channels and 20 Hz for the joints)")
+    p.add_argument("--timing", choices=("auto", "sampled", "held"), default="auto",
+                   help="where the equations put the state against input sample k: at t_k "
+                        "(sampled: a measured current), half a sample later (held: a DAC's "
+                        "zero-order hold), or auto: chosen by held-out equation error "
+                        "(rigid_axis, flexible_joint; the flight models keep sampled)")
     p.add_argument("--fixed", help="known parameters, e.g. m=1.82 (the weighed mass, which "
                                    "payload_mass needs)")
     p.add_argument("--alpha", type=float, default=0.01, help="significance level (default 0.01)")

@@ -192,8 +192,20 @@ def write_report(sel: Selection, out_dir, title: str | None = None, source: str 
     if source:
         lines += [f"Data: {source}", ""]
     lines += [f"Declared model `{sel.model.name}`; derivatives: "
-              f"{js['settings'].get('derivative_filter')}.", "",
-              "## Declared model", ""] + _PARAM_HEAD + _param_rows(sel, sel.declared, units)
+              f"{js['settings'].get('derivative_filter')}.", ""]
+    if getattr(sel.model, "parallel_filter", False):
+        lines += ["Both sides of every equation are low-passed alike (parallel filtering).", ""]
+    tm = sel.settings.get("timing") or {}
+    if tm:
+        why = (f"held-out equation error {tm['held_out_error']['sampled']:.4g} (sampled) against "
+               f"{tm['held_out_error']['held']:.4g} (held) over {tm['windows']} windows, "
+               f"one-sided Wilcoxon p {tm['p_value']:.2g}" if tm.get("status") == "ok"
+               else tm.get("reason") or tm.get("rule", ""))
+        lines += [f"Input timing: **{tm['chosen']}** "
+                  + ("(the state half a sample after each input sample: a zero-order hold)"
+                     if tm["chosen"] == "held" else "(the state at the input's sample instant)")
+                  + f"; {why}.", ""]
+    lines += ["## Declared model", ""] + _PARAM_HEAD + _param_rows(sel, sel.declared, units)
     lines += ["", "| channel | RMSE | NRMSE |", "|---|---|---|"]
     lines += [f"| {k} | {v['rmse']:.4g} {channel_unit(sel.model.name, k, units)} | "
               f"{100 * v['nrmse']:.2f} % |" for k, v in sel.declared_error.items()]

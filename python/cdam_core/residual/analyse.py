@@ -7,6 +7,7 @@ from cdam_core.residual.identifiability import deflection_check
 from cdam_core.models.greybox.registry import get_model
 from cdam_core.models.greybox.effects import LIBRARY, candidates as library_candidates
 from cdam_core.residual.selection import Selection, select
+from cdam_core.residual.timing import choose_timing
 
 __all__ = ["analyse"]
 
@@ -15,7 +16,7 @@ def analyse(model: str, t, signals: dict, extra: dict | None = None, fixed: dict
             cutoff_hz: float | None = None, alpha: float = 0.01, free_run: bool = True,
             validation: tuple | None = None, options: dict | None = None,
             max_steps: int | None = None, declared=(), keep_terms=(),
-            output_error: bool = False) -> Selection:
+            output_error: bool = False, timing: str = "auto") -> Selection:
     """Fit ``model`` to the signals, select missing effects, return the :class:`Selection`.
 
     ``signals`` maps the model's signal names (``tau``, ``q`` / ``tau_m``, ``theta_m``, ``q`` /
@@ -27,10 +28,16 @@ def analyse(model: str, t, signals: dict, extra: dict | None = None, fixed: dict
     ``output_error``: also try the output-error refinement (kept if better on held-out data);
     ``keep_terms``: optional declared terms (``offset``, ``G``, ``Kd``) kept even when the
     held-out data do not support them (a sidecar that declares them);
+    ``timing``: "auto" (chosen from the record on held-out blocks,
+    :func:`cdam_core.residual.timing.choose_timing`; the flight models keep "sampled" at their
+    documented bands), "sampled" or "held" (see ``GreyBoxModel.prepare``); the choice and its
+    evidence are in ``settings["timing"]``;
     ``cutoff_hz``: derivative filter cutoff (default: chosen from the record by held-out
     simulation, :func:`cdam_core.residual.cutoff.choose_cutoff`; the choice and the candidates'
     scores are in ``settings["filter_choice"]``).
     """
+    if timing not in ("auto", "sampled", "held"):
+        raise ValueError(f"timing: expected auto, sampled or held, got {timing!r}")
     m = get_model(model, fixed)
     keep_terms = [keep_terms] if isinstance(keep_terms, str) else list(keep_terms)
     unknown = [p for p in keep_terms if p not in m.parameter_names]
@@ -46,16 +53,25 @@ def analyse(model: str, t, signals: dict, extra: dict | None = None, fixed: dict
     choice = {"rule": "given" if cutoff_hz is not None else "the model's default",
               "chosen_hz": cutoff_hz if cutoff_hz is not None else m.default_cutoff_hz}
     trim = None
-    if cutoff_hz is not None or getattr(m, "parallel_filter", False):
+    if cutoff_hz is not None or getattr(m, "fixed_bands", False):
         filt = DerivativeFilter(cutoff_hz=choice["chosen_hz"])
     else:   # chosen from the record (the flight models keep their documented bands)
         filt, choice = choose_cutoff(m, t, signals, extra)
         trim = choice["trim_samples"]
         cands = at_rest(m, cands, choice, alpha)
         dec = [c for c in cands if c.name in set(declared)]
-    sig = m.prepare(t, signals, filt, extra)
+    if timing == "auto" and getattr(m, "fixed_bands", False):
+        timing_info = {"chosen": "sampled", "rule": "the flight models' documented bands"}
+        timing = "sampled"
+    elif timing == "auto":
+        timing, timing_info = choose_timing(
+            m, lambda tm: m.prepare(t, signals, filt, extra, tm), dec,
+            50 if trim is None else trim, alpha)
+    else:
+        timing_info = {"chosen": timing, "rule": "given"}
+    sig = m.prepare(t, signals, filt, extra, timing)
     check = None
-    if m.cables and not getattr(m, "parallel_filter", False):   # a cable between two encoders
+    if m.cables and not getattr(m, "fixed_bands", False):   # a cable between two encoders
         noise = sum(ev.get("noise_level", 0.0) * choice["chosen_hz"][p]
                     for p, ev in choice.get("signals", {}).items())
         check = deflection_check(sig, trim or 50, noise, alpha)
@@ -63,18 +79,21 @@ def analyse(model: str, t, signals: dict, extra: dict | None = None, fixed: dict
             # not a cable's deflection: the motor side alone, a rigid axis with its friction
             motor = {"tau": signals[m.inputs[0]], "q": signals["theta_m"]}
             sel = analyse("rigid_axis", t, motor, extra, None, None, alpha, free_run,
-                          None, options, max_steps, declared)
+                          None, options, max_steps, declared,
+                          timing=timing_info["chosen"] if timing_info["rule"] == "given"
+                          else "auto")
             sel.settings["identifiability"] = {
                 **check, "declared": m.name, "fallback": "rigid_axis on the motor side "
                 "(tau_m, theta_m): the motor-minus-link angle is not a cable's deflection"}
             return sel
     val = None
     if validation is not None:
-        val = m.prepare(validation[0], validation[1], sig["filter"], None)
+        val = m.prepare(validation[0], validation[1], sig["filter"], None, timing)
     sel = select(m, sig, cands, alpha=alpha, free_run=free_run, validation=val,
                  max_steps=max_steps, declared_effects=dec, trim=trim, keep_terms=keep_terms,
                  output_error=output_error)
     sel.settings["filter_choice"] = choice
+    sel.settings["timing"] = timing_info
     if check is not None:
         sel.settings["identifiability"] = check
     return sel

@@ -88,7 +88,8 @@ def _simulated_signals(fitted: Fit, sig, U, horizon: int, trim: int):
         q = np.array(sig[p], dtype=float, copy=True)
         q[rows] = P[:, :, j].ravel()
         raw[p] = q
-    out = model.prepare(sig["t"], raw, filt, sig.get("extra") or None)
+    out = model.prepare(sig["t"], raw, filt, sig.get("extra") or None,
+                        sig.get("timing", "sampled"))
     covered = np.zeros(n, dtype=bool)
     covered[starts[0]:starts[-1] + H + 1] = True
     for s0 in list(starts) + [starts[-1] + H]:

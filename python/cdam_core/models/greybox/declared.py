@@ -66,6 +66,21 @@ class DerivativeFilter:
         return self
 
 
+TIMINGS = ("sampled", "held")
+
+
+def half_sample_advance(x) -> np.ndarray:
+    """x at t_k + dt/2 by four-point cubic (Lagrange) interpolation; the two-point mean at the
+    first and last interval, the last sample kept."""
+    x = np.asarray(x, dtype=float)
+    y = x.copy()
+    if x.size >= 2:
+        y[:-1] = 0.5 * (x[:-1] + x[1:])
+    if x.size >= 4:
+        y[1:-2] = (-x[:-3] + 9.0 * x[1:-2] + 9.0 * x[2:-1] - x[3:]) / 16.0
+    return y
+
+
 @dataclass(frozen=True)
 class SignalFilters(DerivativeFilter):
     """One cut-off per position signal (their encoders' noise differs); ``cutoff_hz`` is the
@@ -126,10 +141,22 @@ class GreyBoxModel:
     # an estimate outside them is refitted with the bounds and both are reported (estimation.fit)
     bounds: dict[str, tuple[float, float]] = {}
     cables: dict = {}     # link equation -> (motor equation, deflection, its rate, stiffness)
-    parallel_filter = False   # also low-pass both sides of every equation (flight models)
+    # parallel filtering (Gautier's IDIM-LS practice): the same zero-phase low-pass on both sides
+    # of every equation (:meth:`equation_filter`), so the measured input and the columns built
+    # from nonlinear functions of the state (a friction sign, a cubic spring) keep no content
+    # above the band that the differentiated positions lost to the derivative filter
+    parallel_filter = True
+    fixed_bands = False   # True: the documented bands, not a cut-off chosen from the record
     default_cutoff_hz = 100.0
     max_steps = 5
     min_gain = 0.01   # smallest share of the residual SSE an effect must remove to be claimed
+
+    def equation_filter(self, eq: str, s: dict) -> DerivativeFilter:
+        """The parallel filter of equation ``eq``: the lowest of the positions' derivative
+        cut-offs (every equation of a joint holds both encoders' signals), same order."""
+        f = s["filter"]
+        cut = min(f.for_signal(p).cutoff_hz for p in self.positions)
+        return DerivativeFilter(cut, f.order, f.padlen)
 
     @property
     def signal_units(self) -> dict[str, str]:
@@ -155,13 +182,24 @@ class GreyBoxModel:
 
     # -- signals ---------------------------------------------------------------------------
     def prepare(self, t, raw: dict, filt: DerivativeFilter | None = None,
-                extra: dict | None = None) -> dict:
+                extra: dict | None = None, timing: str = "sampled") -> dict:
         """Check the raw signals and add smoothed derivatives (a :class:`Signals`).
 
         ``raw`` maps each name in ``self.signals`` to an array; ``extra`` holds measured channels
         the model leaves out (candidates for ``external_force``). Returns a dict of arrays with
         ``t``, ``dt``, the raw inputs, each position ``p`` (filtered), ``p_d`` and ``p_dd``.
+
+        ``timing``: where the equations evaluate the state against the input sample k.
+        "sampled": at t_k (an input measured at the sample instant, a motor current);
+        "held": at t_k + dt/2, the middle of the interval over which a DAC holds input k (a
+        zero-order hold delays the input's band by half a sample; evaluating the state at the
+        sample instant instead biases the damping by stiffness x dt/2). The filtered positions
+        and their derivatives are advanced by half a sample with the four-point cubic
+        interpolation (-x[k-1] + 9 x[k] + 9 x[k+1] - x[k+2]) / 16 (error O((w dt)^4) on the
+        band-limited signals). ``residual.timing.choose_timing`` chooses it from the record.
         """
+        if timing not in TIMINGS:
+            raise ValueError(f"timing: expected one of {', '.join(TIMINGS)}, got {timing!r}")
         filt = filt or DerivativeFilter()
         t = as_time(t, "t")
         n = t.size
@@ -178,6 +216,10 @@ class GreyBoxModel:
             x = as_signal(raw[p], p, n)
             sig[p + "_raw"] = x
             sig[p], sig[p + "_d"], sig[p + "_dd"] = filt.for_signal(p).apply(x, dt)
+            if timing == "held":
+                for k in (p, p + "_d", p + "_dd"):
+                    sig[k] = half_sample_advance(sig[k])
+        sig["timing"] = timing
         sig["extra"] = {}
         for k, v in (extra or {}).items():
             if k in self.signals:
