@@ -62,7 +62,7 @@ def main(argv=None) -> int:
         print("cross_trajectory.py: error: --no-flights: nothing left to run (add --ardrone)",
               file=sys.stderr)
         return 2
-    quick = dict(iterations=2, lm_epochs=2) if args.quick else {}
+    quick = dict(iterations=2, lm_epochs=2, hidden=4) if args.quick else {}
     models = paper_network_fitters(**quick) if args.paper_networks else None
     out = Path(args.out)
     if args.no_flights:
@@ -136,7 +136,7 @@ def _ardrone_section(out, folds, mean, md, js, quick, ardrone=True) -> int:
     from cdam_core.evaluate.papernets import ardrone_comparison
     from cdam_core.record.realdata.ardrone2 import load_ardrone2
     from cdam_core.report.page import write_page
-    from cdam_core.report.papernets import (ardrone_table, standing_table,
+    from cdam_core.report.papernets import (ardrone_table, selection_md, standing_table,
                                             write_ardrone_figure)
     rows = []
     if ardrone:
@@ -170,7 +170,9 @@ def _ardrone_section(out, folds, mean, md, js, quick, ardrone=True) -> int:
                "![AR.Drone free run](ardrone_free_run.png)", "",
                "*Figure: the AR.Drone test part in free run (angles in rad, positions in m, "
                "against the time from the start of the test part in s): measured, the chosen "
-               "ARX, the selected hybrid and the best of the paper's networks.*", ""]
+               "ARX, the selected hybrid and the best of the paper's networks.*", "",
+               "### What the selected hybrid chose", "",
+               *selection_md(next(r for r in rows if r.name == "hybrid_selected").details), ""]
     write_json_atomic(out / "results.json", js)
     write_page(out / "index.md", md, md[0].lstrip("# "))
     print(standing_table(mean, rows))

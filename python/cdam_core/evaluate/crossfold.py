@@ -92,10 +92,10 @@ def cross_trajectory_fold(files, test_type: str, horizon: int = 50, grid=ARX_GRI
     called with the stacks of all training flights, of the fit flights and of the validation
     flights (the last run of each training type) and scored beside the others on the same rows
     (e.g. ``evaluate.papernets.paper_network_fitters()``)."""
-    train, test, (st_fit, st_valid, st_train, st_test) = _split(files, test_type, loaded)
     for name in models or {}:
         if name in ("naive", "arx1", "arx", "physics", "physics_hold", "model"):
             raise ValueError(f"models: {name!r} is a name the fold already uses")
+    train, test, (st_fit, st_valid, st_train, st_test) = _split(files, test_type, loaded)
     groups = list(NANODRONE_GROUPS)
     arx, orders, val = select_arx(st_fit, st_valid, grid, select_horizons, groups)
     arx1 = ArxModel((1, 1, 1)).fit(st_train.U, st_train.Y, segments=st_train.lengths)

@@ -129,6 +129,7 @@ class HybridSelection:
     validation_r: dict          # {"arx": r, "network": r} on the hybrid's validation rows
     candidates: list = field(default_factory=list)    # (d, s, narx, features, blocked r)
     networks: list = field(default_factory=list)      # (hidden, seed, r network, r arx)
+    network_models: list = field(default_factory=list)   # the fitted candidates, same order
 
     def to_json(self) -> dict:
         return {"decimation": self.decimation, "smoothing_passes": self.smoothing_passes,
@@ -168,7 +169,7 @@ def select_hybrid(U, Y, *, decimations=(1, 2, 4, 8), passes=(0, 1, 3, 5), orders
         raise ValueError("U, Y: no structure could be fitted and run free (record too short?)")
     d, s, narx, f, score = best
     Us, Ys = smooth_pair(U[::d], Y[::d], s)
-    nets, chosen = [], None
+    nets, models, chosen = [], [], None
     for h in hidden:
         for seed in seeds:
             cfg = IdentifyConfig(hidden=int(h), iterations=iterations, lm_epochs=lm_epochs,
@@ -177,12 +178,13 @@ def select_hybrid(U, Y, *, decimations=(1, 2, 4, 8), passes=(0, 1, 3, 5), orders
             m = identify(algo, Us, Ys, seed=int(seed), config=cfg, preprocessed=True).model
             rn, ra = m.validation_r_[1.0], m.validation_r_[0.0]
             nets.append((int(h), int(seed), float(rn), float(ra)))
+            models.append(m)
             if chosen is None or rn > chosen[1]:
                 chosen = (m, rn, ra)
     m, rn, ra = chosen
     m.residual_weight_ = 1.0 if rn > ra else 0.0
     return HybridSelection(d, s, narx, f, float(score), m, bool(rn > ra),
-                           {"arx": float(ra), "network": float(rn)}, cands, nets)
+                           {"arx": float(ra), "network": float(rn)}, cands, nets, models)
 
 
 @dataclass
@@ -259,10 +261,18 @@ def ardrone_comparison(ds, split: float = 0.75, algos=PAPER_ALGOS, variants=("st
               f"{','.join(map(str, sel.narx))}, {sel.features} features")
     rows.append(_row("arx", arx, Ud[nd:], Yd[nd:], outputs, rate / d, t,
                      f"chosen by blocked validation on the training part: {choice}"))
+    details = sel.to_json()
+    for c, m in zip(details["network_candidates"], sel.network_models):
+        if m is sel.model:
+            c["chosen"] = True
+        w = m.residual_weight_
+        m.residual_weight_ = 1.0              # reported beside, never used to choose
+        c["test_r_network"] = _free_run_r(m, Ud[nd:], Yd[nd:])
+        m.residual_weight_ = w
     rows.append(_row("hybrid_selected", sel.model, Ud[nd:], Yd[nd:], outputs, rate / d, t,
                      f"{choice}; network {'kept' if sel.network_kept else 'switched off'} "
                      f"on validation (r {sel.validation_r['network']:.3f} with, "
-                     f"{sel.validation_r['arx']:.3f} without)", sel.to_json()))
+                     f"{sel.validation_r['arx']:.3f} without)", details))
     rows.append(ArdroneRow("quad_physics", None, None, None,
                            "not applicable: the record has PWM commands and Euler angles, "
                            "not rotor speeds and the 13 states"))

@@ -10,7 +10,7 @@ import numpy as np
 from cdam_core.base.jsonio import atomic_target
 from cdam_core.report.horizons import GROUP_UNITS
 
-__all__ = ["standing_table", "ardrone_table", "write_ardrone_figure", "NANO_TO_ARDRONE", "AR_UNITS"]
+__all__ = ["standing_table", "ardrone_table", "selection_md", "write_ardrone_figure", "NANO_TO_ARDRONE", "AR_UNITS"]
 
 #: a nano-drone predictor's name -> its AR.Drone row (the physics model has one row there)
 NANO_TO_ARDRONE = {"physics": "quad_physics", "physics_hold": "quad_physics"}
@@ -96,3 +96,24 @@ def write_ardrone_figure(path, rows, outputs, names=None) -> Path:
         fig.savefig(tmp, dpi=100)
     plt.close(fig)
     return path
+
+
+def selection_md(details: dict, top: int = 8) -> list[str]:
+    """Markdown lines: what the selected hybrid chose on the training part (its
+    ``HybridSelection.to_json()`` with each network candidate's test r added)."""
+    c = sorted(details["structure_candidates"], key=lambda x: -x["blocked_r"])[:top]
+    lines = [f"Preprocessing and structure (blocked validation on the training part, "
+             f"{len(details['structure_candidates'])} candidates; the best {len(c)}):", "",
+             "| decimation | smoothing passes | orders na,nb,nk | features | blocked mean r |",
+             "|---|---|---|---|---|"]
+    lines += [f"| {x['decimation']} | {x['smoothing_passes']} | "
+              f"{','.join(map(str, x['narx']))} | {x['features']} | {_cell(x['blocked_r'])} |"
+              for x in c]
+    lines += ["", "Networks on the ARX residual (validation: the last 20 % of the training "
+              "part; the test r is reported, never used to choose):", "",
+              "| hidden | seed | validation r with network | validation r ARX part | "
+              "test r with network | chosen |", "|---|---|---|---|---|---|"]
+    lines += [f"| {x['hidden']} | {x['seed']} | {_cell(x['validation_r_network'])} | "
+              f"{_cell(x['validation_r_arx'])} | {_cell(x.get('test_r_network'))} | "
+              f"{'yes' if x.get('chosen') else ''} |" for x in details["network_candidates"]]
+    return lines
