@@ -14,7 +14,8 @@ and the error-against-horizon figures (mean over the folds) in OUT_DIR/mean/.
 
 ``--paper-networks`` adds the paper's pipelines (IBOA-, BOA- and CABC-seeded BP networks
 trained by LM, static and NARX, the paper's fixed choices: ``cdam_core.evaluate.papernets``)
-to every fold; ``--ardrone`` adds the AR.Drone flight (first 75 % / last 25 %, free run, mean
+to every fold, and ``iboa_narx_chosen``: the IBOA NARX network with its smoothing and LM goal
+chosen on the fold's validation flights (``papernets.ChosenNetworkFitter``); ``--ardrone`` adds the AR.Drone flight (first 75 % / last 25 %, free run, mean
 r) with the same networks, the naive predictor, the ARX chosen on the training part and the
 selected hybrid (preprocessing and structure chosen by blocked validation on the training part,
 network kept only if it helps there); the page then opens with one table of every predictor on
@@ -38,7 +39,8 @@ from pathlib import Path  # noqa: E402
 from cdam_core.base.jsonio import write_json_atomic, write_text_atomic  # noqa: E402
 from cdam_core.evaluate.crossfold import (TYPES, cross_trajectory_fold,  # noqa: E402
                                           mean_over_folds)
-from cdam_core.evaluate.papernets import paper_network_fitters  # noqa: E402
+from cdam_core.evaluate.papernets import (ChosenNetworkFitter,  # noqa: E402
+                                          paper_network_fitters)
 from cdam_core.record.realdata.nanodrone import exclusion_report, nanodrone_files  # noqa: E402
 from cdam_core.report.horizons import (group_table, published_table,  # noqa: E402
                                        write_horizon_report)
@@ -63,7 +65,12 @@ def main(argv=None) -> int:
               file=sys.stderr)
         return 2
     quick = dict(iterations=2, lm_epochs=2, hidden=4) if args.quick else {}
-    models = paper_network_fitters(**quick) if args.paper_networks else None
+    models, chosen = None, None
+    if args.paper_networks:
+        models = paper_network_fitters(**quick)
+        # the same pipeline with smoothing and LM goal chosen on the validation flights
+        chosen = ChosenNetworkFitter("iboa", "narx", **quick)
+        models["iboa_narx_chosen"] = chosen
     out = Path(args.out)
     if args.no_flights:
         out.mkdir(parents=True, exist_ok=True)
@@ -96,6 +103,13 @@ def main(argv=None) -> int:
         head = (f"## Test type {test_type} ({len(f.test_files)} flights; chosen ARX orders "
                 f"na, nb, nk = {', '.join(map(str, f.orders))}; "
                 f"{time.perf_counter() - t0:.0f} s)")
+        if chosen is not None:
+            c = chosen.choices[-1]
+            head += ("\n\niboa_narx_chosen: " + ", ".join(f"{k} {v}" for k, v in
+                                                         c["chosen"].items()) +
+                     " (validation MAE / naive MAE: " + "; ".join(
+                         ", ".join(f"{k} {v}" for k, v in x.items() if k != "relative_mae") +
+                         f": {x['relative_mae']:.3f}" for x in c["validation"]) + ")")
         table = group_table(f.scores)
         print(head + "\n" + table + "\n", flush=True)
         md += [head, "", table, ""]
@@ -121,6 +135,9 @@ def main(argv=None) -> int:
     def groups_only(js):   # per output at every horizon is in to_json(); kept out here
         return {k: v for k, v in js.items() if k not in ("rmse", "mae")}
     js = {"folds": [groups_only(f.to_json()) for f in folds], "mean": groups_only(mean.to_json())}
+    if chosen is not None:
+        for f, c in zip(js["folds"], chosen.choices):
+            f["iboa_narx_chosen"] = c
     if args.ardrone or args.paper_networks:
         return _ardrone_section(out, folds, mean, md, js, quick, args.ardrone)
     write_text_atomic(out / "index.md", "\n".join(md))
@@ -157,7 +174,7 @@ def _ardrone_section(out, folds, mean, md, js, quick, ardrone=True) -> int:
            "on that record (quad_physics needs the 13 states and rotor speeds; arx1 and the "
            "physics variants are the nano-drone protocol's; the selected hybrid is the "
            "AR.Drone's).", "", standing_table(mean, rows), ""]
-    md = md[:2] + top + md[2:]
+    md = md[:4] + top + md[4:]
     if rows:
         outputs = list(next(r for r in rows if r.metrics).metrics)
         traced = [r for r in rows if r.trace is not None]
