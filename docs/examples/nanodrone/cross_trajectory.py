@@ -15,15 +15,15 @@ and the error-against-horizon figures (mean over the folds) in OUT_DIR/mean/.
 ``--paper-networks`` adds the paper's pipelines (IBOA-, BOA- and CABC-seeded BP networks
 trained by LM, static and NARX, the paper's fixed choices: ``cdam_core.evaluate.papernets``)
 to every fold, and ``iboa_narx_chosen``: the IBOA NARX network with its smoothing and LM goal
-chosen on the fold's validation flights (``papernets.ChosenNetworkFitter``); ``--ardrone`` adds the AR.Drone flight (first 75 % / last 25 %, free run, mean
-r) with the same networks, the naive predictor, the ARX chosen on the training part and the
+chosen on the fold's validation flights (``papernets.ChosenNetworkFitter``); ``--ardrone``
+adds the AR.Drone flight (first 75 % / last 25 %, free run, mean r) with the same networks, the naive predictor, the ARX chosen on the training part and the
 selected hybrid (preprocessing and structure chosen by blocked validation on the training part,
 network kept only if it helps there); the page then opens with one table of every predictor on
 both records. ``--no-flights`` skips the nano-drone folds; ``--quick`` runs tiny settings (2
 optimiser iterations and LM epochs, a one-point hybrid grid) to check the output, not to read.
 The committed report docs/examples/papernets/ is
 ``python docs/examples/nanodrone/cross_trajectory.py docs/examples/papernets --paper-networks
---ardrone`` (about 15 minutes here).
+--ardrone`` (about 20 minutes here, on a busy 2-core machine).
 """
 import os
 
@@ -85,12 +85,20 @@ def main(argv=None) -> int:
               f"to the folder holding nanodrone/ (or give --data)", file=sys.stderr)
         return 3
     out.mkdir(parents=True, exist_ok=True)
+    flags = "".join(f" --{k}" for k in ("paper-networks", "ardrone")
+                    if getattr(args, k.replace("-", "_")))
+    nets = (" The paper's networks (IBOA-, BOA- and CABC-seeded BP trained by LM, static and "
+            "NARX (2, 2, 1), its fixed choices: hidden 20, 5 smoothing passes, LM goal 0.003; "
+            "at most 10,000 evenly spaced training rows) and iboa_narx_chosen (the IBOA NARX "
+            "network with smoothing and LM goal chosen on the validation flights) train on all "
+            "training flights." if args.paper_networks else "")
     loaded, folds, md = {}, [], ["# Nano-drone flights: train on three trajectory types, test "
                                  "on the fourth", "",
                                  "Produced by `python docs/examples/nanodrone/cross_trajectory.py"
-                                 " OUT_DIR`. Predictors: naive (hold the state), ARX(1) (full "
-                                 "state, na = nb = nk = 1, least squares on all training "
-                                 "flights), arx (orders and delay chosen on the training "
+                                 f" OUT_DIR{flags}`." + nets + " Predictors: naive (hold "
+                                 "the state), ARX(1) (full state, na = nb = nk = 1, least "
+                                 "squares on all training flights), arx (orders and delay "
+                                 "chosen on the training "
                                  "flights: the last run of each training type validates). "
                                  "Scored k-step from the measured state with the measured "
                                  "motor speeds, every horizon 1..50 (10 ms steps), on every "
@@ -116,7 +124,8 @@ def main(argv=None) -> int:
     mean = mean_over_folds(folds)
     table = group_table(mean)
     print(f"## Mean over the {len(folds)} folds\n{table}\n")
-    write_horizon_report(mean, out / "mean", "Mean over the folds", dt=0.01)
+    write_horizon_report(mean, out / "mean", "Mean over the folds", dt=0.01,
+                         logy=args.paper_networks)
     arx1 = ["| test type | position [m] | velocity [m/s] | attitude [rad] | rates [rad/s] |",
             "|---|---|---|---|---|"]
     for f in folds:

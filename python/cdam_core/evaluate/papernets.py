@@ -56,7 +56,8 @@ from cdam_core.models.arx import ArxModel
 from cdam_core.preprocess import smooth_pair
 
 __all__ = ["PAPER_ALGOS", "PAPER_NARX", "FLIGHT_MAX_ROWS", "paper_config",
-           "paper_network_fitters", "ChosenNetworkFitter", "CHOICE_GRID", "blocked_free_run_r", "select_hybrid",
+           "paper_network_fitters", "ChosenNetworkFitter", "CHOICE_GRID",
+           "blocked_free_run_r", "select_hybrid",
            "ardrone_comparison", "ArdroneRow"]
 
 PAPER_ALGOS = ("iboa", "boa", "cabc")

@@ -10,7 +10,8 @@ import numpy as np
 from cdam_core.base.jsonio import atomic_target
 from cdam_core.report.horizons import GROUP_UNITS
 
-__all__ = ["standing_table", "ardrone_table", "selection_md", "write_ardrone_figure", "NANO_TO_ARDRONE", "AR_UNITS"]
+__all__ = ["standing_table", "ardrone_table", "selection_md", "write_ardrone_figure",
+           "NANO_TO_ARDRONE", "AR_UNITS"]
 
 #: a nano-drone predictor's name -> its AR.Drone row (the physics model has one row there)
 NANO_TO_ARDRONE = {"physics": "quad_physics", "physics_hold": "quad_physics"}
