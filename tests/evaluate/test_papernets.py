@@ -222,3 +222,5 @@ def test_chosen_network_decides_on_the_validation_flights():
     assert model.narx == (2, 2, 1) and model.is_fitted()
     with pytest.raises(ValueError, match="grid: needs at least one value"):
         ChosenNetworkFitter(grid={"lm_goal": ()})
+    with pytest.raises(ValueError, match="algo: unknown 'pso'"):
+        ChosenNetworkFitter("pso")

@@ -16,7 +16,8 @@ and the error-against-horizon figures (mean over the folds) in OUT_DIR/mean/.
 trained by LM, static and NARX, the paper's fixed choices: ``cdam_core.evaluate.papernets``)
 to every fold, and ``iboa_narx_chosen``: the IBOA NARX network with its smoothing and LM goal
 chosen on the fold's validation flights (``papernets.ChosenNetworkFitter``); ``--ardrone``
-adds the AR.Drone flight (first 75 % / last 25 %, free run, mean r) with the same networks, the naive predictor, the ARX chosen on the training part and the
+adds the AR.Drone flight (first 75 % / last 25 %, free run, mean r) with the same networks,
+the naive predictor, the ARX chosen on the training part and the
 selected hybrid (preprocessing and structure chosen by blocked validation on the training part,
 network kept only if it helps there); the page then opens with one table of every predictor on
 both records. ``--no-flights`` skips the nano-drone folds; ``--quick`` runs tiny settings (2
