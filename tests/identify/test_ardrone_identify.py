@@ -10,6 +10,7 @@ from cdam_core.evaluate import evaluate
 from cdam_core.identify import IdentifyConfig, identify, select_structure
 
 from cdam_core.record.realdata import ardrone2
+from numpy_arx import arx_free_run
 
 
 @pytest.fixture(scope="module")
@@ -24,24 +25,6 @@ def _linear_baseline(U, Y, Ut):
     """Static linear ARX(0, 1, 0) baseline y = [u, 1] W fitted by numpy least squares."""
     W = np.linalg.lstsq(np.c_[U, np.ones(len(U))], Y, rcond=None)[0]
     return np.c_[Ut, np.ones(len(Ut))] @ W
-
-
-def _arx_free_run(U, Y, Ut, Yt, na=4, nb=4, nk=1):
-    """Multi-output ARX(na, nb, nk) on the raw inputs: every output regressed on the last na
-    values of all outputs and u(t-nk) .. u(t-nk-nb+1) of all inputs plus a constant, fitted by
-    least squares on (U, Y); simulated on (Ut, Yt) from the first t0 measured outputs."""
-    t0 = max(na, nk + nb - 1)
-
-    def row(Uc, Yc, t):
-        return np.concatenate([Yc[t - j] for j in range(1, na + 1)]
-                              + [Uc[t - nk - j] for j in range(nb)] + [[1.0]])
-
-    A = np.array([row(U, Y, t) for t in range(t0, len(U))])
-    W = np.linalg.lstsq(A, Y[t0:], rcond=None)[0]
-    P = Yt.copy()
-    for t in range(t0, len(Ut)):
-        P[t] = row(Ut, P, t) @ W
-    return P
 
 
 def _r_rmse(Y, P):
@@ -74,7 +57,7 @@ def test_hybrid_beats_the_independent_arx4_baseline_in_free_run(split):
                          model="hybrid", narx=sel["narx"], features=sel["features"])
     run = identify("iboa", U, Y, seed=0, config=cfg)
     P_h = run.model.predict(Ut, Yt, mode="free_run")
-    P_a = _arx_free_run(U, Y, Ut, Yt)
+    P_a = arx_free_run(U, Y, Ut, Yt)
     s = slice(4, None)  # both models' first predicted sample onwards (ARX(4): t0 = 4)
     r_h, rmse_h, nr_h = _r_rmse(Yt[s], P_h[s])
     r_a, rmse_a, nr_a = _r_rmse(Yt[s], P_a[s])
@@ -86,7 +69,7 @@ def test_hybrid_beats_the_independent_arx4_baseline_in_free_run(split):
     assert np.sum(r_h > r_a) >= 4  # better on most outputs, not only on average
     # most of that gain is the direct term u(t) (nk = 0): ARX(4) with nk = 0 measured here mean
     # r 0.61, NRMSE 1.13; the physics features add a little correlation and cut the error
-    r_0, _, nr_0 = _r_rmse(Yt[s], _arx_free_run(U, Y, Ut, Yt, nk=0)[s])
+    r_0, _, nr_0 = _r_rmse(Yt[s], arx_free_run(U, Y, Ut, Yt, nk=0)[s])
     assert r_h.mean() > r_0.mean() + 0.01
     assert nr_h.mean() < 0.85 * nr_0.mean()
     # the pipeline's own metrics agree with the independent computation
@@ -105,7 +88,7 @@ def test_every_algorithm_static_narx_and_hybrid_on_the_test_part(split, algo):
     0.17-0.22, NARX network -0.01 to 0.23 (it drifts), hybrid 0.65-0.69, ARX(4) 0.39."""
     U, Y, Ut, Yt, names = split
     s = slice(4, None)
-    r_arx = _r_rmse(Yt[s], _arx_free_run(U, Y, Ut, Yt)[s])[0].mean()
+    r_arx = _r_rmse(Yt[s], arx_free_run(U, Y, Ut, Yt)[s])[0].mean()
     static = identify(algo, U, Y, seed=0, config=IdentifyConfig(hidden=10, iterations=20,
                                                                  smoothing_passes=0)).model
     r_static = _r_rmse(Yt[s], static.predict(Ut)[s])[0].mean()

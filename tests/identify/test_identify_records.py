@@ -30,8 +30,11 @@ def test_several_training_records(tmp_path, capsys):
     assert main(["identify", str(tmp_path / "b.parquet"), "--test", str(tmp_path / "c.csv"),
                  "--map", "u=cmd,y=out", "--inputs", "u", "--outputs", "y", *FAST]) == 2
     assert "c.csv: map: column 'cmd'" in capsys.readouterr().err   # the map applies to all
-    # a NARX network would join the records: refused, naming why
-    assert main(argv + ["--narx", "1,1,1"]) == 2
-    assert "trains on one contiguous record" in capsys.readouterr().err
+    # a NARX network trains across the records (no regressor crossing a seam); a hybrid
+    # network would join them: refused, naming why
+    assert main(argv + ["--narx", "1,1,1"]) == 0
+    capsys.readouterr()
+    assert main(argv + ["--narx", "1,1,1", "--model", "hybrid"]) == 2
+    assert "a hybrid network trains on one contiguous record" in capsys.readouterr().err
     assert main(argv[:3] + ["--inputs", "u", "--outputs", "y", *FAST]) == 2
     assert "--split: needs one contiguous TRAIN record" in capsys.readouterr().err

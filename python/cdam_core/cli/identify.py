@@ -14,7 +14,8 @@ def register(subparsers) -> None:
                     "the last part of TRAIN with --split) and an optional validation record; "
                     "compare algorithms over several seeds with a rank-sum test. Several "
                     "TRAIN records (or one cut into segments) are kept apart: each is smoothed "
-                    "on its own, and only a static network trains across them.")
+                    "on its own, and the network (static or NARX; no regressor crosses a seam) "
+                    "trains across them; a hybrid model needs one contiguous record.")
     p.add_argument("train", nargs="+", help="training record(s) (dataset CSV or Parquet)")
     p.add_argument("--map", default=None,
                    help="model names to record columns: name=column[*factor],... or a JSON file")

@@ -27,7 +27,7 @@ from cdam_core.models.arx import ArxModel
 from cdam_core.models.protocol import segment_bounds
 from cdam_core.preprocess import smooth_pair
 
-__all__ = ["persistence", "naive_and_arx", "select_arx", "ARX_GRID"]
+__all__ = ["persistence", "naive_and_arx", "select_arx", "relative_error", "ARX_GRID"]
 
 ARX_GRID = tuple((na, nb, nk) for na in (1, 2, 3) for nb in (1, 2, 3) for nk in (1, 2))
 
@@ -109,7 +109,7 @@ def naive_and_arx(U, Y, records: dict, names, *, narx=None, smoothing_passes: in
     return out
 
 
-def _relative_error(model, stack, horizons, groups) -> float:
+def relative_error(model, stack, horizons, groups) -> float:
     """Mean over horizons (and groups, else outputs) of the model's MAE over the naive MAE."""
     sc = score_horizons(model, stack.U, stack.Y, stack.outputs, horizons,
                         segments=stack.lengths, free_run=False, groups=groups)
@@ -132,7 +132,7 @@ def select_arx(train, valid, grid=ARX_GRID, horizons=(1, 10, 25, 50), groups=())
     for orders in grid:
         try:
             m = ArxModel(orders).fit(train.U, train.Y, segments=train.lengths)
-            scores[orders] = _relative_error(m, valid, horizons, groups)
+            scores[orders] = relative_error(m, valid, horizons, groups)
         except ValueError:          # a diverging candidate is no candidate
             scores[orders] = float("inf")
     best = min(grid, key=lambda g: (scores[g], g))

@@ -50,7 +50,8 @@ def compare(algos, U, Y, *, records: dict | None = None, seeds=range(10), config
         names: output names for the metric tables.
         progress: show a tqdm bar on stderr.
         segments: the training rows as records laid end to end (lengths or ranges): each is
-            smoothed on its own; only a static network (no NARX orders) trains across them.
+            smoothed on its own; the paper's network (static or NARX: no regressor crosses a
+            seam) trains across them, a hybrid model does not.
         record_segments: {record name: segments} of the evaluation records cut into segments.
 
     Returns a :class:`Comparison`.
@@ -66,10 +67,11 @@ def compare(algos, U, Y, *, records: dict | None = None, seeds=range(10), config
         raise ValueError("seeds: need at least one seed")
     cfg = config or IdentifyConfig()
     bounds = segment_bounds(segments, len(U))
-    if len(bounds) > 1 and (cfg.narx is not None or cfg.model != "bp"):
-        raise ValueError(f"segments: {len(bounds)} training segments; a NARX or hybrid network "
-                         f"trains on one contiguous record (a static network, or an arx model "
-                         f"through Model.fit(..., segments=), trains across them)")
+    if len(bounds) > 1 and cfg.model != "bp":
+        raise ValueError(f"segments: {len(bounds)} training segments; a hybrid network "
+                         f"trains on one contiguous record (the paper's network, static or "
+                         f"NARX, and an arx model train across them, no regressor crossing a "
+                         f"seam)")
     parts = [preprocess(U[a:b], Y[a:b], cfg.smoothing_passes) for a, b in bounds]
     Us, Ys = np.vstack([u for u, _ in parts]), np.vstack([y for _, y in parts])
     names = list(names) if names is not None else [f"y{k}" for k in range(Ys.shape[1])]
@@ -80,7 +82,8 @@ def compare(algos, U, Y, *, records: dict | None = None, seeds=range(10), config
     for algo in algos:
         runs, best = [], None
         for seed in seeds:
-            run = identify(algo, Us, Ys, seed=seed, config=cfg, preprocessed=True)
+            run = identify(algo, Us, Ys, seed=seed, config=cfg, preprocessed=True,
+                           segments=bounds if cfg.model == "bp" else None)
             metrics = {name: evaluate(run.model, Ur, Yr, names,
                                       smoothing_passes=cfg.smoothing_passes,
                                       segments=(record_segments or {}).get(name))

@@ -85,9 +85,16 @@ def _split(files, test_type, loaded):
 
 def cross_trajectory_fold(files, test_type: str, horizon: int = 50, grid=ARX_GRID,
                           select_horizons=(1, 10, 25, 50), loaded: dict | None = None,
-                          physics: bool = True) -> Fold:
+                          physics: bool = True, models: dict | None = None) -> Fold:
     """Run one fold (module doc) on the flights ``files``; ``loaded``: a {path: Dataset}
-    cache shared between folds (filled here); ``physics``: score the physics models too."""
+    cache shared between folds (filled here); ``physics``: score the physics models too.
+    ``models``: more models of any kind, {name: fit(train, fit, valid) -> fitted Model}, each
+    called with the stacks of all training flights, of the fit flights and of the validation
+    flights (the last run of each training type) and scored beside the others on the same rows
+    (e.g. ``evaluate.papernets.paper_network_fitters()``)."""
+    for name in models or {}:
+        if name in ("naive", "arx1", "arx", "physics", "physics_hold", "model"):
+            raise ValueError(f"models: {name!r} is a name the fold already uses")
     train, test, (st_fit, st_valid, st_train, st_test) = _split(files, test_type, loaded)
     groups = list(NANODRONE_GROUPS)
     arx, orders, val = select_arx(st_fit, st_valid, grid, select_horizons, groups)
@@ -98,6 +105,8 @@ def cross_trajectory_fold(files, test_type: str, horizon: int = 50, grid=ARX_GRI
         for name, rates in (("physics", "dynamic"), ("physics_hold", "hold")):
             others[name] = QuadPhysics(dt=dt, rates=rates).fit(st_train.U, st_train.Y,
                                                                segments=st_train.lengths)
+    for name, fit in (models or {}).items():
+        others[name] = fit(st_train, st_fit, st_valid)
     hs = list(range(1, horizon + 1))
     kw = dict(segments=st_test.lengths, free_run=False, groups=groups,
               first=max([arx1.t0] + [m.t0 for m in others.values()]))

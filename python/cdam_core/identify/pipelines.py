@@ -31,6 +31,7 @@ from cdam_core.base.metrics import adaptation_value
 from cdam_core.base.orders import parse_orders
 from cdam_core.models.hybrid import HybridNarx
 from cdam_core.models.network import BPNetwork
+from cdam_core.models.protocol import segment_bounds
 from cdam_core.preprocess import MinMaxScaler, smooth_pair
 
 __all__ = ["ALGORITHMS", "IdentifyConfig", "IdentifyRun", "identify", "preprocess"]
@@ -65,6 +66,8 @@ class IdentifyConfig:
     optimiser_options: dict = field(default_factory=dict)
     model: str = "bp"             # "bp": the paper's network; "hybrid": ARX + residual network
     features: str = "raw"         # "raw" or "physics" (hybrid only; identify/hybrid.py)
+    max_rows: int | None = None   # bp: the optimiser and LM see at most this many evenly
+                                  # spaced training rows (every ceil(rows / max_rows)-th)
 
     def __post_init__(self):
         if self.hidden != "auto" and (not isinstance(self.hidden, (int, np.integer))
@@ -83,6 +86,9 @@ class IdentifyConfig:
                 raise ValueError(f"narx: expected (na, nb, nk) >= 0 with na + nb >= 1, "
                                  f"got {self.narx!r}")
             self.narx = narx
+        if self.max_rows is not None and (isinstance(self.max_rows, bool) or not isinstance(
+                self.max_rows, (int, np.integer)) or self.max_rows < 1):
+            raise ValueError(f"max_rows: must be a positive integer or None, got {self.max_rows!r}")
         if self.model not in ("bp", "hybrid"):
             raise ValueError(f"model: unknown {self.model!r}; use 'bp' or 'hybrid'")
         if self.features not in ("raw", "physics"):
@@ -146,9 +152,12 @@ preprocess = smooth_pair   # the pipeline's step 1 (cdam_core.preprocess.smooth_
 
 
 def identify(algo: str, U, Y, *, seed: int = 0, config: IdentifyConfig | None = None,
-             preprocessed: bool = False) -> IdentifyRun:
+             preprocessed: bool = False, segments=None) -> IdentifyRun:
     """Run one pipeline (``algo`` in 'iboa', 'boa', 'cabc', 'bp') on training inputs U (N, i)
-    and outputs Y (N, m). ``preprocessed=True`` skips the smoothing (already done)."""
+    and outputs Y (N, m). ``preprocessed=True`` skips the smoothing (already done).
+    ``segments`` (bp model only): records laid end to end (lengths or (start, stop) ranges),
+    each smoothed on its own (one of fewer than 5 rows is left as measured), no NARX
+    regressor crossing a seam."""
     if algo not in ALGORITHMS:
         raise ValueError(f"algo: unknown {algo!r}; use one of {', '.join(ALGORITHMS)}")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < 2**32:
@@ -162,14 +171,23 @@ def identify(algo: str, U, Y, *, seed: int = 0, config: IdentifyConfig | None = 
     if not (np.all(np.isfinite(U)) and np.all(np.isfinite(Y))):
         raise ValueError("U, Y: contain NaN or Inf")
     t_start = time.perf_counter()
+    bounds = segment_bounds(segments, U.shape[0])
+    if len(bounds) > 1 and cfg.model != "bp":
+        raise ValueError("segments: a hybrid model is fitted on one record")
     if not preprocessed:
-        U, Y = preprocess(U, Y, cfg.smoothing_passes)
+        # a segment too short for the five-point smoother (< 5 rows) stays as measured
+        parts = [preprocess(U[a:b], Y[a:b], cfg.smoothing_passes) if b - a >= 5 or len(bounds) == 1
+                 else (U[a:b], Y[a:b]) for a, b in bounds]
+        U, Y = (np.vstack([p[j] for p in parts]) for j in (0, 1))
     if cfg.model == "hybrid":
         return _identify_hybrid(algo, U, Y, int(seed), cfg, t_start)
     net = BPNetwork(hidden=cfg.hidden, activation=cfg.activation, epochs=cfg.lm_epochs,
               goal=cfg.lm_goal, narx=cfg.narx, seed=int(seed), threads=cfg.threads)
     theta0, curve, opt_mse, evals = None, None, None, 0
     t_opt = 0.0
+    t0_rows = 0 if cfg.narx is None else parse_orders(cfg.narx).t0
+    rows = sum(b - a - t0_rows for a, b in bounds if b - a > t0_rows)
+    stride = 1 if cfg.max_rows is None else max(1, -(-rows // int(cfg.max_rows)))
     if algo != "bp":
         Us = MinMaxScaler().fit(U).transform(U)
         Ys = MinMaxScaler().fit(Y).transform(Y)
@@ -177,7 +195,12 @@ def identify(algo: str, U, Y, *, seed: int = 0, config: IdentifyConfig | None = 
             X, T = Us, Ys
         else:
             orders = parse_orders(cfg.narx)
-            X, T = _core.narx_regressors(Us, Ys, *orders), Ys[orders.t0:]
+            parts = [(_core.narx_regressors(Us[a:b], Ys[a:b], *orders), Ys[a + orders.t0:b])
+                     for a, b in bounds if b - a > orders.t0]
+            if not parts:
+                raise ValueError(f"U, Y: no segment has more than t0 = {orders.t0} samples")
+            X, T = (np.vstack([p[j] for p in parts]) for j in (0, 1))
+        X, T = (np.ascontiguousarray(A[::stride]) for A in (X, T))
         t0 = time.perf_counter()
         res = _core.optimise(algo, "bp", X=X, T=T, hidden=cfg.hidden, activation=cfg.activation,
                              seed=int(seed), options=cfg.options(algo), threads=cfg.threads)
@@ -185,7 +208,7 @@ def identify(algo: str, U, Y, *, seed: int = 0, config: IdentifyConfig | None = 
         theta0, curve = res["best"], np.asarray(res["curve"])
         opt_mse, evals = float(res["best_fitness"]), int(res["evaluations"])
     t0 = time.perf_counter()
-    net.fit(U, Y, theta0=theta0)
+    net.fit(U, Y, theta0=theta0, segments=bounds, stride=stride)
     t_lm = time.perf_counter() - t0
     lm_mse = np.asarray(net.history_["mse"], dtype=np.float64)
     return IdentifyRun(algo=algo, seed=int(seed), model=net, curve=curve, optimiser_mse=opt_mse,

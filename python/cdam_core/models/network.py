@@ -12,7 +12,7 @@ import numpy as np
 from cdam_core import _core
 from cdam_core.base.checks import as_2d, finite_float, positive_int, same_rows
 from cdam_core.base.orders import parse_orders
-from cdam_core.models.protocol import Model
+from cdam_core.models.protocol import Model, segment_bounds
 from cdam_core.models.schema import field_array
 from cdam_core.preprocess import MinMaxScaler
 
@@ -119,11 +119,19 @@ class BPNetwork(Model):
         return np.asarray(_core.Rng(int(self.seed)).uniform_array(D, -1.0, 1.0), dtype=dtype)
 
     # ---- estimator API ----
-    def fit(self, U, Y, theta0=None, validation=None, callback=None) -> "BPNetwork":
+    fits_segments = True
+
+    def fit(self, U, Y, theta0=None, validation=None, callback=None, segments=None,
+            stride=1) -> "BPNetwork":
         """Train on inputs U (N, i) and outputs Y (N, m).
 
         ``validation=(U_val, Y_val)`` early-stops LM (max_fail) and returns the best-validation
         weights; ``callback(epoch, mse)`` is called each epoch (return False to stop).
+        ``segments`` (lengths or (start, stop) ranges, as for ``predict``): records laid end to
+        end; no NARX regressor crosses a seam (a segment of no more than t0 rows gives none).
+        ``stride``: train on every ``stride``-th row of the design (regressors and targets,
+        all segments together; the scalers still see every row): the cost of an LM epoch grows
+        with the rows, so long records can be thinned.
         """
         cfg = self._settings()                    # set_params or attribute edits since __init__
         U = as_2d(U, "U")
@@ -133,7 +141,11 @@ class BPNetwork(Model):
         Y1 = Y
         Y = as_2d(Y, "Y", dtype=U.dtype)
         same_rows(U, Y, "U, Y")
+        bounds = segment_bounds(segments, U.shape[0])
+        stride = positive_int(stride, "stride")
         val = None
+        if len(bounds) > 1 and validation is None and cfg["validation_fraction"] > 0:
+            raise ValueError("validation_fraction: not with several segments; give validation")
         if validation is not None:
             if len(validation) != 2:
                 raise ValueError("validation: expected (U_val, Y_val)")
@@ -152,7 +164,12 @@ class BPNetwork(Model):
         self.n_inputs_, self.n_outputs_ = U.shape[1], Y.shape[1]
         self.scaler_x_ = MinMaxScaler().fit(U)
         self.scaler_y_ = MinMaxScaler().fit(Y)
-        X, T = self._design(self.scaler_x_.transform(U), self.scaler_y_.transform(Y))
+        Us, Ys = self.scaler_x_.transform(U), self.scaler_y_.transform(Y)
+        parts = [self._design(Us[a:b], Ys[a:b]) for a, b in bounds if b - a > self.t0]
+        if not parts:
+            raise ValueError(f"segments: none has more than t0 = {self.t0} samples")
+        X, T = (np.ascontiguousarray(np.vstack([p[j] for p in parts])[::stride])
+                for j in (0, 1))
         Xv = Tv = None
         if val is not None:
             Xv, Tv = self._design(self.scaler_x_.transform(val[0]), self.scaler_y_.transform(val[1]))

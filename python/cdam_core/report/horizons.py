@@ -49,22 +49,22 @@ def group_table(scores, at=(1, 10, 25, 50)) -> str:
 
 
 def write_horizon_report(scores, folder, title: str, dt: float | None = None,
-                         units: dict | None = None) -> Path:
+                         units: dict | None = None, logy: bool = False) -> Path:
     """``index.md``, ``index.html`` and ``rmse_vs_horizon.png`` (one panel per output) in
-    ``folder``."""
+    ``folder``; ``logy``: logarithmic error axes (predictors that differ by decades)."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     units = {**STANDARD_UNITS, **(units or {})}      # the dataset format's, else given
     x = np.asarray(scores.horizons, dtype=float) * (dt if dt else 1.0)
     _panels(folder / "rmse_vs_horizon.png", x, dt, scores.rmse,
-            [f"RMSE {o} [{units.get(o, 'output units')}]" for o in scores.outputs])
+            [f"RMSE {o} [{units.get(o, 'output units')}]" for o in scores.outputs], logy)
     md = [f"# {title}", "", horizon_table(scores), "",
           "![RMSE against horizon](rmse_vs_horizon.png)", "",
           "*Figure: root-mean-square error of each output against the prediction horizon, for "
           "the model and the naive predictor y(t) = y(t - h), on the same rows.*", ""]
     if scores.groups:
         _panels(folder / "group_mae_vs_horizon.png", x, dt, scores.group_mae,
-                [f"MAE {g.name} [{_unit(g)}]" for g in scores.groups])
+                [f"MAE {g.name} [{_unit(g)}]" for g in scores.groups], logy)
         md += ["## Per group (the nano-drone benchmark's metrics)", "", group_table(scores), "",
                "![MAE per group against horizon](group_mae_vs_horizon.png)", "",
                "*Figure: mean error per group against the prediction horizon (Euclidean norm of "
@@ -77,19 +77,31 @@ def _unit(group) -> str:
     return "rad" if group.kind != "vector" else GROUP_UNITS.get(group.name, "output units")
 
 
-def _panels(path, x, dt, series: dict, ylabels: list[str]) -> None:
-    """One panel per column of the (H, k) arrays of ``series`` (predictor -> array)."""
+def _panels(path, x, dt, series: dict, ylabels: list[str], logy: bool = False) -> None:
+    """One panel per column of the (H, k) arrays of ``series`` (predictor -> array); more
+    than 10 predictors get distinct colours (tab20's ten dark ones, then its light ones) and the
+    legend goes beside the panels."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     k = len(ylabels)
-    fig, axes = plt.subplots(k, 1, figsize=(6.4, 2.2 * k + 0.6), squeeze=False, sharex=True)
+    many = len(series) > 10
+    tab = plt.get_cmap("tab20").colors
+    colours = list(tab[0::2]) + list(tab[1::2]) if many else [None] * len(series)
+    fig, axes = plt.subplots(k, 1, figsize=(8.4 if many else 6.4, 2.2 * k + 0.6),
+                             squeeze=False, sharex=True)
     for j, (ax, label) in enumerate(zip(axes[:, 0], ylabels)):
-        for name, A in series.items():
-            ax.plot(x, A[:, j], marker="." if len(x) < 60 else None, label=name)
+        for c, (name, A) in enumerate(series.items()):
+            ax.plot(x, A[:, j], marker="." if len(x) < 60 else None, label=name,
+                    color=colours[c % len(colours)])
         ax.set_ylabel(label)
+        if logy:
+            ax.set_yscale("log")
         ax.grid(True, alpha=0.3)
-    axes[0, 0].legend(loc="upper left", fontsize=8)
+    if many:
+        axes[0, 0].legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
+    else:
+        axes[0, 0].legend(loc="upper left", fontsize=8)
     axes[-1, 0].set_xlabel("horizon [s]" if dt else "horizon [samples]")
     fig.tight_layout()
     with atomic_target(path) as tmp:
