@@ -82,6 +82,47 @@ namespace kernel {
     v[s] = num / den; /* one division per value */                                           \
   }
 
+// The outputs of the vectors of samples at s (V: the vector type, one sample a lane; the
+// hidden activations at a + j B + s), 4 at a time, and their squared errors added to the
+// vector TOT: y_k = b2_k + sum_j W2(k, j) a_j, e_k = t_k - y_k. Shared by the double kernel
+// below and the float32 one (kernels_f32.hpp).
+#define CDAM_OUTPUT_ERRORS(V, TOT)                                                           \
+  Index k0 = 0;                                                                              \
+  for (; k0 + 4 <= m; k0 += 4) {                                                             \
+    V y0 = V{} + b2[k0], y1 = V{} + b2[k0 + 1], y2 = V{} + b2[k0 + 2], y3 = V{} + b2[k0 + 3]; \
+    for (Index j = 0; j < h; ++j) {                                                          \
+      V aj;                                                                                  \
+      std::memcpy(&aj, a + j * B + s, sizeof aj);                                            \
+      const auto* w = W2 + j * m + k0;                                                       \
+      y0 += w[0] * aj;                                                                       \
+      y1 += w[1] * aj;                                                                       \
+      y2 += w[2] * aj;                                                                       \
+      y3 += w[3] * aj;                                                                       \
+    }                                                                                        \
+    V t0, t1, t2, t3;                                                                        \
+    std::memcpy(&t0, T + k0 * ld + s0 + s, sizeof t0);                                       \
+    std::memcpy(&t1, T + (k0 + 1) * ld + s0 + s, sizeof t1);                                 \
+    std::memcpy(&t2, T + (k0 + 2) * ld + s0 + s, sizeof t2);                                 \
+    std::memcpy(&t3, T + (k0 + 3) * ld + s0 + s, sizeof t3);                                 \
+    t0 -= y0;                                                                                \
+    t1 -= y1;                                                                                \
+    t2 -= y2;                                                                                \
+    t3 -= y3;                                                                                \
+    TOT += (t0 * t0 + t1 * t1) + (t2 * t2 + t3 * t3);                                        \
+  }                                                                                          \
+  for (; k0 < m; ++k0) {                                                                     \
+    V y0 = V{} + b2[k0];                                                                     \
+    for (Index j = 0; j < h; ++j) {                                                          \
+      V aj;                                                                                  \
+      std::memcpy(&aj, a + j * B + s, sizeof aj);                                            \
+      y0 += W2[j * m + k0] * aj;                                                             \
+    }                                                                                        \
+    V t0;                                                                                    \
+    std::memcpy(&t0, T + k0 * ld + s0 + s, sizeof t0);                                       \
+    t0 -= y0;                                                                                \
+    TOT += t0 * t0;                                                                          \
+  }
+
 // SSE of one network (W1 h x i, b1, W2 m x h, b2; column-major) over samples [0, n) of the
 // SoA record: x_l(s) = X[l * ld + s], t_k(s) = T[k * ld + s]. a: h B values of caller
 // storage. Register-blocked over 4 samples (one vector of 4 doubles: one ymm
@@ -112,44 +153,7 @@ namespace kernel {
       }                                                                                      \
     activate_block(a, h * B, tansig);                                                        \
     for (Index s = 0; s < nv; s += 4) {                                                      \
-      Index k0 = 0;                                                                          \
-      for (; k0 + 4 <= m; k0 += 4) {                                                         \
-        v4d y0 = {b2[k0], b2[k0], b2[k0], b2[k0]};                                           \
-        v4d y1 = {b2[k0 + 1], b2[k0 + 1], b2[k0 + 1], b2[k0 + 1]};                           \
-        v4d y2 = {b2[k0 + 2], b2[k0 + 2], b2[k0 + 2], b2[k0 + 2]};                           \
-        v4d y3 = {b2[k0 + 3], b2[k0 + 3], b2[k0 + 3], b2[k0 + 3]};                           \
-        for (Index j = 0; j < h; ++j) {                                                      \
-          v4d aj;                                                                            \
-          std::memcpy(&aj, a + j * B + s, sizeof aj);                                        \
-          const double* w = W2 + j * m + k0;                                                 \
-          y0 += w[0] * aj;                                                                   \
-          y1 += w[1] * aj;                                                                   \
-          y2 += w[2] * aj;                                                                   \
-          y3 += w[3] * aj;                                                                   \
-        }                                                                                    \
-        v4d t0, t1, t2, t3;                                                                  \
-        std::memcpy(&t0, T + k0 * ld + s0 + s, sizeof t0);                                   \
-        std::memcpy(&t1, T + (k0 + 1) * ld + s0 + s, sizeof t1);                             \
-        std::memcpy(&t2, T + (k0 + 2) * ld + s0 + s, sizeof t2);                             \
-        std::memcpy(&t3, T + (k0 + 3) * ld + s0 + s, sizeof t3);                             \
-        t0 -= y0;                                                                            \
-        t1 -= y1;                                                                            \
-        t2 -= y2;                                                                            \
-        t3 -= y3;                                                                            \
-        total4 += (t0 * t0 + t1 * t1) + (t2 * t2 + t3 * t3);                                 \
-      }                                                                                      \
-      for (; k0 < m; ++k0) {                                                                 \
-        v4d y0 = {b2[k0], b2[k0], b2[k0], b2[k0]};                                           \
-        for (Index j = 0; j < h; ++j) {                                                      \
-          v4d aj;                                                                            \
-          std::memcpy(&aj, a + j * B + s, sizeof aj);                                        \
-          y0 += W2[j * m + k0] * aj;                                                         \
-        }                                                                                    \
-        v4d t0;                                                                              \
-        std::memcpy(&t0, T + k0 * ld + s0 + s, sizeof t0);                                   \
-        t0 -= y0;                                                                            \
-        total4 += t0 * t0;                                                                   \
-      }                                                                                      \
+      CDAM_OUTPUT_ERRORS(v4d, total4)                                                        \
     }                                                                                        \
     for (Index s = nv; s < nb; ++s)                                                          \
       for (Index k = 0; k < m; ++k) {                                                        \
