@@ -182,6 +182,15 @@ FitnessPrecision precision_of(const std::string& p) {
   value_error("precision: unknown '" + p + "'; use 'float64' or 'float32'");
 }
 
+// float32 precision: a record value beyond the float range cannot be represented (refused).
+void check_float_range(FitnessPrecision prec, const double* p, Index n, const char* name) {
+  if (prec != FitnessPrecision::Float32) return;
+  for (Index k = 0; k < n; ++k)
+    if (std::isfinite(p[k]) && std::abs(p[k]) > 3.4028234663852886e38)
+      value_error(std::string(name) + ": values beyond the float32 range (3.4e38) with "
+                  "precision='float32'");
+}
+
 std::uint32_t seed_of(long long seed) {
   if (seed < 0 || seed > 0xFFFFFFFFLL) value_error("seed: must be in 0 .. 2**32 - 1");
   return static_cast<std::uint32_t>(seed);
@@ -201,6 +210,8 @@ py::dict optimise(const std::string& algo, const std::string& objective, const p
     auto t = matrix<double>(py::array::ensure(Tt), "T", -1, x.shape(0));
     mlp_params_or_raise(x.shape(1), hidden, t.shape(1));
     Mlp<double> net(x.shape(1), hidden, t.shape(1), activation_from(act));
+    check_float_range(prec, x.data(), static_cast<Index>(x.size()), "X");
+    check_float_range(prec, t.data(), static_cast<Index>(t.size()), "T");
     Map Xm(x.data(), x.shape(1), x.shape(0)), Tm(t.data(), t.shape(1), t.shape(0));
     BpFitness<double> fit(net, Xm, Tm, threads, 64, prec);
     return run(algo, opts, fit, net.num_params(), sd);
@@ -238,6 +249,9 @@ py::array bp_fitness(const py::array& thetas, const py::array& X, const py::arra
   const bool one = thetas.ndim() == 1;
   auto th = one ? vector<double>(thetas, "thetas", D) : matrix<double>(thetas, "thetas", D);
   const Index n = one ? 1 : th.shape(0);
+  check_float_range(prec, x.data(), static_cast<Index>(x.size()), "X");
+  check_float_range(prec, t.data(), static_cast<Index>(t.size()), "T");
+  check_float_range(prec, th.data(), static_cast<Index>(th.size()), "thetas");
   py::array_t<double> out(n);
   {
     py::gil_scoped_release nogil;

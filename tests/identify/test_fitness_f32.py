@@ -84,6 +84,16 @@ def test_precision_rejected_by_name():
         _core.optimise("iboa", "bp", X=X, T=T, hidden=3, precision="float16")
     with pytest.raises(ValueError, match="fitness_precision"):
         IdentifyConfig(fitness_precision="float16")
+    big = X.copy()
+    big[3, 1] = 1e300     # fine in float64, beyond the float32 range
+    th = np.zeros(2 * 3 + 3 + 3 + 1)
+    assert np.isfinite(_core.bp_fitness(th, big, T, 3)[0])
+    with pytest.raises(ValueError, match="X: values beyond the float32 range"):
+        _core.bp_fitness(th, big, T, 3, precision="float32")
+    with pytest.raises(ValueError, match="thetas: values beyond the float32 range"):
+        _core.bp_fitness(th + 1e39, X, T, 3, precision="float32")
+    with pytest.raises(ValueError, match="T: values beyond the float32 range"):
+        _core.optimise("iboa", "bp", X=X, T=T - 1e39, hidden=3, precision="float32")
 
 
 def test_identify_with_float32_fitness_runs_and_lm_starts_at_its_best():

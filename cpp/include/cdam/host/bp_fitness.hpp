@@ -25,6 +25,7 @@
 #include <Eigen/Core>
 #include <algorithm>
 #include <atomic>
+#include <cmath>
 #include <condition_variable>
 #include <mutex>
 #include <thread>
@@ -67,8 +68,8 @@ class BpFitness {
       xf_.resize(static_cast<size_t>(n_ * i));
       tf_.resize(static_cast<size_t>(n_ * m));
       for (Index s = 0; s < n_; ++s) {
-        for (Index l = 0; l < i; ++l) xf_[static_cast<size_t>(l * n_ + s)] = static_cast<float>(X(l, s));
-        for (Index k = 0; k < m; ++k) tf_[static_cast<size_t>(k * n_ + s)] = static_cast<float>(T(k, s));
+        for (Index l = 0; l < i; ++l) xf_[static_cast<size_t>(l * n_ + s)] = to_float(X(l, s));
+        for (Index k = 0; k < m; ++k) tf_[static_cast<size_t>(k * n_ + s)] = to_float(T(k, s));
       }
       workf_.resize(static_cast<size_t>(threads_ * net_.hidden() * kBlockF32));
       thf_.resize(static_cast<size_t>(max_batch * dim()));
@@ -124,7 +125,7 @@ class BpFitness {
     if (f32_) {  // the batch's parameters rounded to float once
       const Index len = n * dim();
       if (static_cast<size_t>(len) > thf_.size()) thf_.resize(static_cast<size_t>(len));
-      for (Index q = 0; q < len; ++q) thf_[static_cast<size_t>(q)] = static_cast<float>(thetas[q]);
+      for (Index q = 0; q < len; ++q) thf_[static_cast<size_t>(q)] = to_float(thetas[q]);
     }
     job_thetas_ = thetas;
     job_tasks_ = tasks;
@@ -188,6 +189,13 @@ class BpFitness {
       const Index lo = n_ * c / chunks_, hi = n_ * (c + 1) / chunks_;
       parts_[static_cast<size_t>(q)] = chunk_sse(job_thetas_ + ind * D, lo, hi, t);
     }
+  }
+
+  // double -> float, saturating to +-inf beyond the float range (a plain cast is undefined
+  // there); NaN stays NaN. The bindings refuse records beyond the float range by name.
+  static float to_float(double v) {
+    constexpr double kMax = 3.4028234663852886e38;  // FLT_MAX
+    return v > kMax ? HUGE_VALF : (v < -kMax ? -HUGE_VALF : static_cast<float>(v));
   }
 
   static void cpu_relax() {
