@@ -33,9 +33,10 @@ def blas_threads(n: int):
         yield
 
 
-def dgemm_gflops(threads: int = 1, n: int = 1200) -> float:
-    """numpy's double GEMM rate (GFLOP/s) on `threads` BLAS threads, measured now."""
-    a = np.random.default_rng(1).standard_normal((n, n))
+def dgemm_gflops(threads: int = 1, n: int = 1200, dtype=np.float64) -> float:
+    """numpy's GEMM rate (GFLOP/s) on `threads` BLAS threads, measured now (dtype float32:
+    the SGEMM rate)."""
+    a = np.random.default_rng(1).standard_normal((n, n)).astype(dtype)
     b = a.T.copy()
     with blas_threads(threads):
         a @ b

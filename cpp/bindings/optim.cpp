@@ -176,6 +176,21 @@ py::dict run(const std::string& algo, py::dict options, Fitness& fitness, Index 
   return out;
 }
 
+FitnessPrecision precision_of(const std::string& p) {
+  if (p == "float64") return FitnessPrecision::Float64;
+  if (p == "float32") return FitnessPrecision::Float32;
+  value_error("precision: unknown '" + p + "'; use 'float64' or 'float32'");
+}
+
+// float32 precision: a record value beyond the float range cannot be represented (refused).
+void check_float_range(FitnessPrecision prec, const double* p, Index n, const char* name) {
+  if (prec != FitnessPrecision::Float32) return;
+  for (Index k = 0; k < n; ++k)
+    if (std::isfinite(p[k]) && std::abs(p[k]) > 3.4028234663852886e38)
+      value_error(std::string(name) + ": values beyond the float32 range (3.4e38) with "
+                  "precision='float32'");
+}
+
 std::uint32_t seed_of(long long seed) {
   if (seed < 0 || seed > 0xFFFFFFFFLL) value_error("seed: must be in 0 .. 2**32 - 1");
   return static_cast<std::uint32_t>(seed);
@@ -183,8 +198,10 @@ std::uint32_t seed_of(long long seed) {
 
 py::dict optimise(const std::string& algo, const std::string& objective, const py::object& X,
                   const py::object& Tt, long long hidden, const std::string& act, long long dim,
-                  long long seed, const py::object& options, long long threads_) {
+                  long long seed, const py::object& options, long long threads_,
+                  const std::string& precision) {
   const std::uint32_t sd = seed_of(seed);
+  const FitnessPrecision prec = precision_of(precision);
   const int threads = int_arg(threads_, "threads", 1);
   py::dict opts = options.is_none() ? py::dict() : py::dict(options);
   if (objective == "bp") {
@@ -193,8 +210,10 @@ py::dict optimise(const std::string& algo, const std::string& objective, const p
     auto t = matrix<double>(py::array::ensure(Tt), "T", -1, x.shape(0));
     mlp_params_or_raise(x.shape(1), hidden, t.shape(1));
     Mlp<double> net(x.shape(1), hidden, t.shape(1), activation_from(act));
+    check_float_range(prec, x.data(), static_cast<Index>(x.size()), "X");
+    check_float_range(prec, t.data(), static_cast<Index>(t.size()), "T");
     Map Xm(x.data(), x.shape(1), x.shape(0)), Tm(t.data(), t.shape(1), t.shape(0));
-    BpFitness<double> fit(net, Xm, Tm, threads);
+    BpFitness<double> fit(net, Xm, Tm, threads, 64, prec);
     return run(algo, opts, fit, net.num_params(), sd);
   }
   check_positive(dim, "dim");
@@ -218,8 +237,10 @@ py::dict optimise(const std::string& algo, const std::string& objective, const p
 }
 
 py::array bp_fitness(const py::array& thetas, const py::array& X, const py::array& Tt,
-                     long long hidden, const std::string& act, long long threads_) {
+                     long long hidden, const std::string& act, long long threads_,
+                     const std::string& precision) {
   check_positive(hidden, "hidden");
+  const FitnessPrecision prec = precision_of(precision);
   const int threads = int_arg(threads_, "threads", 1);
   auto x = matrix<double>(X, "X");
   auto t = matrix<double>(Tt, "T", -1, x.shape(0));
@@ -228,11 +249,14 @@ py::array bp_fitness(const py::array& thetas, const py::array& X, const py::arra
   const bool one = thetas.ndim() == 1;
   auto th = one ? vector<double>(thetas, "thetas", D) : matrix<double>(thetas, "thetas", D);
   const Index n = one ? 1 : th.shape(0);
+  check_float_range(prec, x.data(), static_cast<Index>(x.size()), "X");
+  check_float_range(prec, t.data(), static_cast<Index>(t.size()), "T");
+  check_float_range(prec, th.data(), static_cast<Index>(th.size()), "thetas");
   py::array_t<double> out(n);
   {
     py::gil_scoped_release nogil;
     Map Xm(x.data(), x.shape(1), x.shape(0)), Tm(t.data(), t.shape(1), t.shape(0));
-    BpFitness<double> fit(net, Xm, Tm, threads, n);
+    BpFitness<double> fit(net, Xm, Tm, threads, n, prec);
     fit.batch(th.data(), n, out.mutable_data());
   }
   return out;
@@ -244,13 +268,16 @@ void register_optim(py::module_& m) {
   m.def("optimise", &optimise, py::arg("algorithm"), py::arg("objective") = "bp", py::kw_only(),
         py::arg("X") = py::none(), py::arg("T") = py::none(), py::arg("hidden") = 1,
         py::arg("activation") = "tansig", py::arg("dim") = 1, py::arg("seed") = 0,
-        py::arg("options") = py::none(), py::arg("threads") = 2,
+        py::arg("options") = py::none(), py::arg("threads") = 2, py::arg("precision") = "float64",
         "Run BOA, IBOA or CABC (algorithm 'boa'|'iboa'|'cabc') on the BP fitness (training MSE "
         "of the network given by the individual on X (N, i), T (N, m)) or a test function "
         "('sphere', 'rastrigin' of `dim` variables). Returns a dict: best, best_fitness, curve "
-        "(iterations + 1), evaluations, positions (n, D), fitness (n).");
+        "(iterations + 1), evaluations, positions (n, D), fitness (n). precision 'float32': the "
+        "BP fitness in float (8/16-lane kernel; the swarm itself stays double).");
   m.def("bp_fitness", &bp_fitness, py::arg("thetas"), py::arg("X"), py::arg("T"),
         py::arg("hidden"), py::arg("activation") = "tansig", py::arg("threads") = 2,
+        py::arg("precision") = "float64",
         "Training MSE sum((T - Y)^2) / (N m) of each theta (rows of a (n, D) array, or one (D,)); "
-        "deterministic for any thread count.");
+        "deterministic for any thread count. precision 'float32': computed in float (agrees to "
+        "float rounding).");
 }

@@ -95,34 +95,37 @@ TEST_CASE("network Jacobian equals central finite differences") {
 
 TEST_CASE("structured J'J and J'e equal those formed from the explicit Jacobian") {
   Rng rng(11);
-  const Index i = 3, h = 5, m = 2, n = 700;  // n > 2 blocks of 256 and two threads
-  Mlp<double> net(i, h, m, Activation::Tansig);
-  const Index D = net.num_params();
-  Eigen::MatrixXd X(i, n), T(m, n);
-  for (Index k = 0; k < X.size(); ++k) X.data()[k] = rng.uniform(-1.0, 1.0);
-  for (Index k = 0; k < T.size(); ++k) T.data()[k] = rng.uniform(-1.0, 1.0);
-  Eigen::VectorXd theta(D);
-  for (Index k = 0; k < D; ++k) theta[k] = rng.uniform(-1.0, 1.0);
-  Eigen::MatrixXd Jn(m, D), JtJ = Eigen::MatrixXd::Zero(D, D);
-  Eigen::VectorXd Jte = Eigen::VectorXd::Zero(D), hid(h), y(m);
-  double sse = 0;
-  for (Index s = 0; s < n; ++s) {
-    net.jacobian(theta.data(), X.col(s).data(), hid.data(), Jn.data());
-    net.forward(theta.data(), X.col(s).data(), hid.data(), y.data());
-    const Eigen::VectorXd e = T.col(s) - y;
-    JtJ += Jn.transpose() * Jn;
-    Jte += Jn.transpose() * e;
-    sse += e.squaredNorm();
-  }
-  for (int threads : {1, 2}) {
-    NormalEquations<double> ne(net, 256, threads);
-    Eigen::VectorXd jte;
-    Eigen::MatrixXd jtj;
-    NormalEquations<double>::ConstMap Xm(X.data(), i, n), Tm(T.data(), m, n);
-    const double s2 = ne.evaluate(theta.data(), Xm, Tm, &jte, &jtj);
-    CHECK(s2 == doctest::Approx(sse).epsilon(1e-12));
-    CHECK((jtj - JtJ).cwiseAbs().maxCoeff() <= 1e-11 * JtJ.cwiseAbs().maxCoeff());
-    CHECK((jte - Jte).cwiseAbs().maxCoeff() <= 1e-11 * Jte.cwiseAbs().maxCoeff());
+  // n > 2 blocks of 256 and two threads; h = 10 and 13 pad the fused blocks to 12 and 16 rows
+  for (const Index h : {5, 10, 13}) {
+    const Index i = 3, m = 2, n = 700;
+    Mlp<double> net(i, h, m, Activation::Tansig);
+    const Index D = net.num_params();
+    Eigen::MatrixXd X(i, n), T(m, n);
+    for (Index k = 0; k < X.size(); ++k) X.data()[k] = rng.uniform(-1.0, 1.0);
+    for (Index k = 0; k < T.size(); ++k) T.data()[k] = rng.uniform(-1.0, 1.0);
+    Eigen::VectorXd theta(D);
+    for (Index k = 0; k < D; ++k) theta[k] = rng.uniform(-1.0, 1.0);
+    Eigen::MatrixXd Jn(m, D), JtJ = Eigen::MatrixXd::Zero(D, D);
+    Eigen::VectorXd Jte = Eigen::VectorXd::Zero(D), hid(h), y(m);
+    double sse = 0;
+    for (Index s = 0; s < n; ++s) {
+      net.jacobian(theta.data(), X.col(s).data(), hid.data(), Jn.data());
+      net.forward(theta.data(), X.col(s).data(), hid.data(), y.data());
+      const Eigen::VectorXd e = T.col(s) - y;
+      JtJ += Jn.transpose() * Jn;
+      Jte += Jn.transpose() * e;
+      sse += e.squaredNorm();
+    }
+    for (int threads : {1, 2}) {
+      NormalEquations<double> ne(net, 256, threads);
+      Eigen::VectorXd jte;
+      Eigen::MatrixXd jtj;
+      NormalEquations<double>::ConstMap Xm(X.data(), i, n), Tm(T.data(), m, n);
+      const double s2 = ne.evaluate(theta.data(), Xm, Tm, &jte, &jtj);
+      CHECK(s2 == doctest::Approx(sse).epsilon(1e-12));
+      CHECK((jtj - JtJ).cwiseAbs().maxCoeff() <= 1e-11 * JtJ.cwiseAbs().maxCoeff());
+      CHECK((jte - Jte).cwiseAbs().maxCoeff() <= 1e-11 * Jte.cwiseAbs().maxCoeff());
+    }
   }
 }
 

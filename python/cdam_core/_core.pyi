@@ -22,9 +22,9 @@ class Rng:
         ...
     def uniform_array(self, n: typing.SupportsInt | typing.SupportsIndex, a: typing.SupportsFloat | typing.SupportsIndex = 0.0, b: typing.SupportsFloat | typing.SupportsIndex = 1.0) -> numpy.typing.NDArray[numpy.float64]:
         ...
-def bp_fitness(thetas: numpy.ndarray, X: numpy.ndarray, T: numpy.ndarray, hidden: typing.SupportsInt | typing.SupportsIndex, activation: str = 'tansig', threads: typing.SupportsInt | typing.SupportsIndex = 2) -> numpy.ndarray:
+def bp_fitness(thetas: numpy.ndarray, X: numpy.ndarray, T: numpy.ndarray, hidden: typing.SupportsInt | typing.SupportsIndex, activation: str = 'tansig', threads: typing.SupportsInt | typing.SupportsIndex = 2, precision: str = 'float64') -> numpy.ndarray:
     """
-    Training MSE sum((T - Y)^2) / (N m) of each theta (rows of a (n, D) array, or one (D,)); deterministic for any thread count.
+    Training MSE sum((T - Y)^2) / (N m) of each theta (rows of a (n, D) array, or one (D,)); deterministic for any thread count. precision 'float32': computed in float (agrees to float rounding).
     """
 def cancel_native_loops(cancel: bool = True) -> None:
     """
@@ -68,9 +68,9 @@ def narx_simulate(theta: numpy.ndarray, U: numpy.ndarray, Y0: numpy.ndarray, hid
     """
     Free-run simulation (N, m): Y0 holds the first t0 outputs; predictions are fed back.
     """
-def optimise(algorithm: str, objective: str = 'bp', *, X: typing.Any = None, T: typing.Any = None, hidden: typing.SupportsInt | typing.SupportsIndex = 1, activation: str = 'tansig', dim: typing.SupportsInt | typing.SupportsIndex = 1, seed: typing.SupportsInt | typing.SupportsIndex = 0, options: typing.Any = None, threads: typing.SupportsInt | typing.SupportsIndex = 2) -> dict:
+def optimise(algorithm: str, objective: str = 'bp', *, X: typing.Any = None, T: typing.Any = None, hidden: typing.SupportsInt | typing.SupportsIndex = 1, activation: str = 'tansig', dim: typing.SupportsInt | typing.SupportsIndex = 1, seed: typing.SupportsInt | typing.SupportsIndex = 0, options: typing.Any = None, threads: typing.SupportsInt | typing.SupportsIndex = 2, precision: str = 'float64') -> dict:
     """
-    Run BOA, IBOA or CABC (algorithm 'boa'|'iboa'|'cabc') on the BP fitness (training MSE of the network given by the individual on X (N, i), T (N, m)) or a test function ('sphere', 'rastrigin' of `dim` variables). Returns a dict: best, best_fitness, curve (iterations + 1), evaluations, positions (n, D), fitness (n).
+    Run BOA, IBOA or CABC (algorithm 'boa'|'iboa'|'cabc') on the BP fitness (training MSE of the network given by the individual on X (N, i), T (N, m)) or a test function ('sphere', 'rastrigin' of `dim` variables). Returns a dict: best, best_fitness, curve (iterations + 1), evaluations, positions (n, D), fitness (n). precision 'float32': the BP fitness in float (8/16-lane kernel; the swarm itself stays double).
     """
 def sim_closed_loop(plant: numpy.ndarray, control: numpy.ndarray, x0: numpy.ndarray, setpoints: numpy.ndarray, dt: typing.SupportsFloat | typing.SupportsIndex, substeps: typing.SupportsInt | typing.SupportsIndex) -> tuple[numpy.typing.NDArray[numpy.float64], numpy.typing.NDArray[numpy.float64]]:
     """

@@ -63,6 +63,7 @@ class IdentifyConfig:
     lm_epochs: int = 50
     lm_goal: float = 0.003
     threads: int = 2
+    fitness_precision: str = "float64"  # the swarm's BP fitness: "float64" or "float32"
     optimiser_options: dict = field(default_factory=dict)
     model: str = "bp"             # "bp": the paper's network; "hybrid": ARX + residual network
     features: str = "raw"         # "raw" or "physics" (hybrid only; identify/hybrid.py)
@@ -89,6 +90,9 @@ class IdentifyConfig:
         if self.max_rows is not None and (isinstance(self.max_rows, bool) or not isinstance(
                 self.max_rows, (int, np.integer)) or self.max_rows < 1):
             raise ValueError(f"max_rows: must be a positive integer or None, got {self.max_rows!r}")
+        if self.fitness_precision not in ("float64", "float32"):
+            raise ValueError(f"fitness_precision: unknown {self.fitness_precision!r}; "
+                             "use 'float64' or 'float32'")
         if self.model not in ("bp", "hybrid"):
             raise ValueError(f"model: unknown {self.model!r}; use 'bp' or 'hybrid'")
         if self.features not in ("raw", "physics"):
@@ -203,7 +207,8 @@ def identify(algo: str, U, Y, *, seed: int = 0, config: IdentifyConfig | None = 
         X, T = (np.ascontiguousarray(A[::stride]) for A in (X, T))
         t0 = time.perf_counter()
         res = _core.optimise(algo, "bp", X=X, T=T, hidden=cfg.hidden, activation=cfg.activation,
-                             seed=int(seed), options=cfg.options(algo), threads=cfg.threads)
+                             seed=int(seed), options=cfg.options(algo), threads=cfg.threads,
+                             precision=cfg.fitness_precision)
         t_opt = time.perf_counter() - t0
         theta0, curve = res["best"], np.asarray(res["curve"])
         opt_mse, evals = float(res["best_fitness"]), int(res["evaluations"])

@@ -82,6 +82,47 @@ namespace kernel {
     v[s] = num / den; /* one division per value */                                           \
   }
 
+// The outputs of the vectors of samples at s (V: the vector type, one sample a lane; the
+// hidden activations at a + j B + s), 4 at a time, and their squared errors added to the
+// vector TOT: y_k = b2_k + sum_j W2(k, j) a_j, e_k = t_k - y_k. Shared by the double kernel
+// below and the float32 one (kernels_f32.hpp).
+#define CDAM_OUTPUT_ERRORS(V, TOT)                                                           \
+  Index k0 = 0;                                                                              \
+  for (; k0 + 4 <= m; k0 += 4) {                                                             \
+    V y0 = V{} + b2[k0], y1 = V{} + b2[k0 + 1], y2 = V{} + b2[k0 + 2], y3 = V{} + b2[k0 + 3]; \
+    for (Index j = 0; j < h; ++j) {                                                          \
+      V aj;                                                                                  \
+      std::memcpy(&aj, a + j * B + s, sizeof aj);                                            \
+      const auto* w = W2 + j * m + k0;                                                       \
+      y0 += w[0] * aj;                                                                       \
+      y1 += w[1] * aj;                                                                       \
+      y2 += w[2] * aj;                                                                       \
+      y3 += w[3] * aj;                                                                       \
+    }                                                                                        \
+    V t0, t1, t2, t3;                                                                        \
+    std::memcpy(&t0, T + k0 * ld + s0 + s, sizeof t0);                                       \
+    std::memcpy(&t1, T + (k0 + 1) * ld + s0 + s, sizeof t1);                                 \
+    std::memcpy(&t2, T + (k0 + 2) * ld + s0 + s, sizeof t2);                                 \
+    std::memcpy(&t3, T + (k0 + 3) * ld + s0 + s, sizeof t3);                                 \
+    t0 -= y0;                                                                                \
+    t1 -= y1;                                                                                \
+    t2 -= y2;                                                                                \
+    t3 -= y3;                                                                                \
+    TOT += (t0 * t0 + t1 * t1) + (t2 * t2 + t3 * t3);                                        \
+  }                                                                                          \
+  for (; k0 < m; ++k0) {                                                                     \
+    V y0 = V{} + b2[k0];                                                                     \
+    for (Index j = 0; j < h; ++j) {                                                          \
+      V aj;                                                                                  \
+      std::memcpy(&aj, a + j * B + s, sizeof aj);                                            \
+      y0 += W2[j * m + k0] * aj;                                                             \
+    }                                                                                        \
+    V t0;                                                                                    \
+    std::memcpy(&t0, T + k0 * ld + s0 + s, sizeof t0);                                       \
+    t0 -= y0;                                                                                \
+    TOT += t0 * t0;                                                                          \
+  }
+
 // SSE of one network (W1 h x i, b1, W2 m x h, b2; column-major) over samples [0, n) of the
 // SoA record: x_l(s) = X[l * ld + s], t_k(s) = T[k * ld + s]. a: h B values of caller
 // storage. Register-blocked over 4 samples (one vector of 4 doubles: one ymm
@@ -112,44 +153,7 @@ namespace kernel {
       }                                                                                      \
     activate_block(a, h * B, tansig);                                                        \
     for (Index s = 0; s < nv; s += 4) {                                                      \
-      Index k0 = 0;                                                                          \
-      for (; k0 + 4 <= m; k0 += 4) {                                                         \
-        v4d y0 = {b2[k0], b2[k0], b2[k0], b2[k0]};                                           \
-        v4d y1 = {b2[k0 + 1], b2[k0 + 1], b2[k0 + 1], b2[k0 + 1]};                           \
-        v4d y2 = {b2[k0 + 2], b2[k0 + 2], b2[k0 + 2], b2[k0 + 2]};                           \
-        v4d y3 = {b2[k0 + 3], b2[k0 + 3], b2[k0 + 3], b2[k0 + 3]};                           \
-        for (Index j = 0; j < h; ++j) {                                                      \
-          v4d aj;                                                                            \
-          std::memcpy(&aj, a + j * B + s, sizeof aj);                                        \
-          const double* w = W2 + j * m + k0;                                                 \
-          y0 += w[0] * aj;                                                                   \
-          y1 += w[1] * aj;                                                                   \
-          y2 += w[2] * aj;                                                                   \
-          y3 += w[3] * aj;                                                                   \
-        }                                                                                    \
-        v4d t0, t1, t2, t3;                                                                  \
-        std::memcpy(&t0, T + k0 * ld + s0 + s, sizeof t0);                                   \
-        std::memcpy(&t1, T + (k0 + 1) * ld + s0 + s, sizeof t1);                             \
-        std::memcpy(&t2, T + (k0 + 2) * ld + s0 + s, sizeof t2);                             \
-        std::memcpy(&t3, T + (k0 + 3) * ld + s0 + s, sizeof t3);                             \
-        t0 -= y0;                                                                            \
-        t1 -= y1;                                                                            \
-        t2 -= y2;                                                                            \
-        t3 -= y3;                                                                            \
-        total4 += (t0 * t0 + t1 * t1) + (t2 * t2 + t3 * t3);                                 \
-      }                                                                                      \
-      for (; k0 < m; ++k0) {                                                                 \
-        v4d y0 = {b2[k0], b2[k0], b2[k0], b2[k0]};                                           \
-        for (Index j = 0; j < h; ++j) {                                                      \
-          v4d aj;                                                                            \
-          std::memcpy(&aj, a + j * B + s, sizeof aj);                                        \
-          y0 += W2[j * m + k0] * aj;                                                         \
-        }                                                                                    \
-        v4d t0;                                                                              \
-        std::memcpy(&t0, T + k0 * ld + s0 + s, sizeof t0);                                   \
-        t0 -= y0;                                                                            \
-        total4 += t0 * t0;                                                                   \
-      }                                                                                      \
+      CDAM_OUTPUT_ERRORS(v4d, total4)                                                        \
     }                                                                                        \
     for (Index s = nv; s < nb; ++s)                                                          \
       for (Index k = 0; k < m; ++k) {                                                        \
@@ -245,17 +249,21 @@ namespace kernel {
 //   the lower triangle of sum [a; 1] [a; 1]^T (R, with the sums of a and the sample count).
 // Multiply-adds per sample for 6-20-8: about 9,900 against 12,900 for the whole lower triangle
 // of [v; a] [v; a]^T; the row sums come with them.
+// Row strides: block l of v starts at row l hs and [a; 1] at nz hs, with ha rows; hs >= h and
+// ha >= h + 1 let the caller pad each block with rows of zeros to a multiple of 4 (no tile
+// remainder runs one row at a time; the padded sums are zero and never read).
 #define CDAM_JTJ_BODY                                                                        \
-  const Index P = nz * h;                                                                    \
+  const Index P = nz * hs;                                                                   \
   for (Index s0 = 0; s0 < nb; s0 += 32) {                                                    \
     const Index ns = nb - s0 < 32 ? nb - s0 : 32;                                            \
     const double* Vs = V + s0 * ldv;                                                         \
     for (Index l = 0; l < nz; ++l)                                                           \
       for (Index l2 = 0; l2 <= l; ++l2)                                                      \
-        tiles(K + l * h + l2 * h * ldk, ldk, Vs + l * h, Vs + l2 * h, ldv, h, h, ns, true, 1.0); \
+        tiles(K + l * hs + l2 * hs * ldk, ldk, Vs + l * hs, Vs + l2 * hs, ldv, hs, hs, ns, true, \
+              1.0);                                                                          \
     for (Index l = 0; l < nz; ++l)                                                           \
-      tiles(K + P + l * h * ldk, ldk, Vs + P, Vs + l * h, ldv, h + 1, h, ns, false, 1.0);    \
-    tiles(K + P + P * ldk, ldk, Vs + P, Vs + P, ldv, h + 1, h + 1, ns, true, 1.0);           \
+      tiles(K + P + l * hs * ldk, ldk, Vs + P, Vs + l * hs, ldv, ha, hs, ns, false, 1.0);    \
+    tiles(K + P + P * ldk, ldk, Vs + P, Vs + P, ldv, ha, ha, ns, true, 1.0);                 \
   }
 
 // Cholesky factor of the symmetric n x n matrix A (lower triangle read, column-major, leading
@@ -309,8 +317,8 @@ namespace kernel {
       Index ldv, Index R, Index C, Index ns, bool lower, double alpha
 
 #define CDAM_JTJ_ARGS                                                                        \
-  double *__restrict K, Index ldk, const double *__restrict V, Index ldv, Index h, Index nz,  \
-      Index nb
+  double *__restrict K, Index ldk, const double *__restrict V, Index ldv, Index hs, Index ha, \
+      Index nz, Index nb
 
 #define CDAM_SSE_ARGS                                                                        \
   const double *__restrict W1, const double *__restrict b1, const double *__restrict W2,      \
@@ -418,15 +426,22 @@ inline void syrk_lower(double* G, Index ldg, const double* V, Index ldv, Index P
   kernel::generic::syrk_lower(G, ldg, V, ldv, P, nb, 1.0);
 }
 
+// The same with padded blocks (CDAM_JTJ_BODY): block l of v at row l hs (hs >= h), [a; 1] at
+// row nz hs with ha >= h + 1 rows (padding rows zero); K at least nz hs + ha square.
+inline void jtj_blocks_padded(double* K, Index ldk, const double* V, Index ldv, Index hs, Index ha,
+                              Index nz, Index nb, KernelPath p = KernelPath::Auto) {
+#if CDAM_HAVE_AVX2_CLONE
+  if (avx2_path(p)) return kernel::avx2::jtj_blocks(K, ldk, V, ldv, hs, ha, nz, nb);
+#endif
+  (void)p;
+  kernel::generic::jtj_blocks(K, ldk, V, ldv, hs, ha, nz, nb);
+}
+
 // The J'J sums with the network's symmetries (CDAM_JTJ_BODY): V has nz h + h + 1 rows (the
 // blocks v_l, a, a row of ones), K (leading dimension ldk, at least nz h + h + 1 square).
 inline void jtj_blocks(double* K, Index ldk, const double* V, Index ldv, Index h, Index nz,
                        Index nb, KernelPath p = KernelPath::Auto) {
-#if CDAM_HAVE_AVX2_CLONE
-  if (avx2_path(p)) return kernel::avx2::jtj_blocks(K, ldk, V, ldv, h, nz, nb);
-#endif
-  (void)p;
-  kernel::generic::jtj_blocks(K, ldk, V, ldv, h, nz, nb);
+  jtj_blocks_padded(K, ldk, V, ldv, h, h + 1, nz, nb, p);
 }
 
 // Cholesky factor in place (CDAM_CHOL_BODY): A (n x n, leading dimension ld, lower triangle
