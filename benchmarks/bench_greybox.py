@@ -5,7 +5,7 @@ on EMPS (DATA_EMPS, the final model: rigid axis + Coulomb + asymmetric friction)
 
 - ``greybox_free_run``: the model kind's free run over DATA_EMPS (24,841 samples, one lane):
   the path of ``cdam residual``'s free runs and of the benchmark protocol's score.
-- ``greybox_windows``: the held-out validation windows (RK4), each window's initial state
+- ``greybox_windows``: the held-out validation windows (by RK4), each window's initial state
   perturbed (3 lanes per window), as ``BlockedCV._shooting`` runs them.
 - ``greybox_oe_jacobian``: one output-error Jacobian over the training windows: the base
   point and one group of lanes per parameter in one rollout, against the numpy path running
@@ -71,7 +71,8 @@ def _windows_case():
 
 def windows() -> dict:
     g, h, U, Y, starts, lanes, H = _windows_case()
-    out = _entry(lambda: g.windows(U, Y, lanes, H), lambda: h.windows(U, Y, lanes, H),
+    out = _entry(lambda: g.windows(U, Y, lanes, H, integrator="rk4"),
+                 lambda: h.windows(U, Y, lanes, H, integrator="rk4"),
                  what="RK4, every window at once")
     out.update(windows=int(starts.size), lanes=int(lanes.size), horizon=H)
     return out

@@ -531,19 +531,21 @@ class GreyBox(Model):
         self._inertia = self._inertia_matrix()
         return self
 
-    def windows(self, U, Y, starts, steps: int, x0=None, v0=None, integrator: str = "rk4",
+    def windows(self, U, Y, starts, steps: int, x0=None, v0=None, integrator: str = "euler",
                 thetas=None) -> np.ndarray:
         """Simulate ``steps`` samples from the measured state at each row of ``starts`` (one
         segment ``U``, ``Y``: multiple shooting windows), or from the given positions ``x0``
         and velocities ``v0`` (each (len(starts), outputs)); returns the simulated positions
         (steps, len(starts), outputs) of rows ``start + 1 .. start + steps``.
 
-        ``integrator``: "rk4" (default: Runge-Kutta 4 with the inputs held over the sample, so
-        a window's timing error is far below the half-sample effects its scores decide on,
-        see :meth:`_choose_substeps`) or "euler" (the model kind's own integrator).
+        ``integrator``: "euler" (default: the model kind's semi-implicit Euler, what a saved
+        model and the firmware run; its timing error is half a substep) or "rk4" (Runge-Kutta
+        4 with the inputs held over the sample: a window's integration error far below the
+        half-sample effects its scores may decide on, see :meth:`_choose_substeps`).
         ``thetas``: (G, parameters) in the order of :meth:`parameters`; the windows are split
         into G consecutive groups, each simulated with its own parameter values (a batched
-        finite-difference Jacobian)."""
+        finite-difference Jacobian).
+        """
         self._check_fitted()
         U, Y = as_2d(U, "U"), as_2d(Y, "Y")
         if U.shape != (Y.shape[0], self.n_inputs_) or Y.shape[1] != self.n_outputs_:
