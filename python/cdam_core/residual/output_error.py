@@ -89,14 +89,19 @@ def refine(g, U, Y, starts, shooting, bounds: dict) -> tuple[dict, dict]:
 
 
 def _steps(x, lo, hi, rel: float = DIFF_STEP) -> np.ndarray:
-    """scipy.optimize.least_squares' forward-difference steps for ``diff_step`` ``rel``:
-    rel sign(x) max(1, |x|), taken backwards where the forward point leaves the bounds, and
-    the step actually representable (x + h) - x."""
+    """scipy.optimize.least_squares' forward-difference steps for ``diff_step`` ``rel``
+    (scipy.optimize._numdiff: rel sign(x) |x|, sqrt(eps) sign(x) max(1, |x|) where that is no
+    step, turned back or shortened at a bound), as the step actually taken: (x + h) - x."""
     sign = np.where(x >= 0, 1.0, -1.0)
-    h = rel * sign * np.maximum(1.0, np.abs(x))
+    h = rel * sign * np.abs(x)
+    h = np.where((x + h) - x == 0, np.sqrt(np.finfo(float).eps) * sign * np.maximum(1.0, np.abs(x)),
+                 h)
+    lower, upper = x - lo, hi - x
     out = (x + h < lo) | (x + h > hi)
-    back = out & (x - h >= lo) & (x - h <= hi)
-    h = np.where(back, -h, h)
+    fitting = np.abs(h) <= np.maximum(lower, upper)
+    h = np.where(out & fitting, -h, h)
+    h = np.where(~fitting & (upper >= lower), upper, h)
+    h = np.where(~fitting & (upper < lower), -lower, h)
     return (x + h) - x
 
 
