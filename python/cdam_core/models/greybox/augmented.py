@@ -7,7 +7,10 @@ positions. Sample time ``dt`` is part of the model (the effects shift and differ
 
 Prediction integrates the equations forward (semi-implicit Euler, ``substeps`` per sample; the
 one integrator of the grey-box models: :mod:`cdam_core.models.greybox.freerun` runs the residual
-loop's free runs through it). The state at a row is the measured
+loop's free runs through it; its simulation windows may use RK4 instead, ``windows``). The
+equations are written once, in numpy; the rollout runs them compiled (:mod:`.trace` records
+them as a tape for ``_core.greybox_rollout``), the numpy step loop being its reference and
+fallback. The state at a row is the measured
 position and the backward difference of the last two measured positions, so ``t0 = 2``: one-step
 predicts row t from rows t-2, t-1 and the input at t-1; k-step integrates k samples from the
 state at t-k, all windows at once; free run integrates the whole segment from its first two rows.
