@@ -5,7 +5,8 @@ model's *simulation*. The refinement starts from the IDIM estimates and minimise
 simulated windows (the held-out validation's windows: ``H`` samples from the measured state,
 each window's initial state projected out by least squares) over the estimated parameters with
 ``scipy.optimize.least_squares`` (trust-region reflective, the model's physical bounds,
-finite-difference Jacobian). Standard deviations from the Jacobian at the optimum,
+a forward-difference Jacobian with scipy's steps whose columns are simulated in one batch:
+every perturbed parameter set is a group of lanes of one rollout, ``GreyBox.windows``). Standard deviations from the Jacobian at the optimum,
 sqrt(diag(s^2 (J'J)^-1)), as optimistic as IDIM's (windows taken as independent).
 
 Which estimate the final model keeps is decided on held-out data like everything else: the
@@ -24,6 +25,7 @@ from cdam_core.models.greybox.estimation import apply_fit
 __all__ = ["refine", "refined_fit"]
 
 MAX_EVALUATIONS = 80
+DIFF_STEP = 1e-4   # relative step of the forward differences (scipy's diff_step)
 
 
 def refine(g, U, Y, starts, shooting, bounds: dict) -> tuple[dict, dict]:
@@ -47,9 +49,30 @@ def refine(g, U, Y, starts, shooting, bounds: dict) -> tuple[dict, dict]:
             return np.full(starts.size, 1e3)
         return np.sqrt(np.maximum(e, 0.0))
 
+    full = list(g.theta_)
+    cols = [full.index(p) for p in names]
+
+    def jacobian(x):
+        """Forward differences (scipy's '2-point' steps, turned back at a bound), every
+        column's windows simulated in one batch with the base point; column by column when
+        the batch cannot be simulated (a trial point that diverges)."""
+        h = _steps(x, lo, hi)
+        base = np.array([g.theta_[p] for p in full])
+        TH = np.tile(base, (len(names) + 1, 1))
+        TH[0, cols] = x * scale
+        for j in range(len(names)):
+            TH[j + 1, cols] = x * scale
+            TH[j + 1, cols[j]] = (x[j] + h[j]) * scale[j]
+        try:
+            E = np.sqrt(np.maximum(shooting(g, U, Y, starts, thetas=TH), 0.0))
+            f0, F = E[0], E[1:]
+        except ValueError:
+            f0 = residual(x)
+            F = np.array([residual(x + h[j] * np.eye(len(names))[j]) for j in range(len(names))])
+        return ((F - f0[None, :]) / h[:, None]).T
+
     r0 = residual(x0)
-    sol = least_squares(residual, x0, bounds=(lo, hi), diff_step=1e-4,
-                        max_nfev=MAX_EVALUATIONS)
+    sol = least_squares(residual, x0, jac=jacobian, bounds=(lo, hi), max_nfev=MAX_EVALUATIONS)
     theta = dict(zip(names, map(float, sol.x * scale)))
     g.set_parameters(theta)
     dof = max(sol.fun.size - len(names), 1)
@@ -63,6 +86,23 @@ def refine(g, U, Y, starts, shooting, bounds: dict) -> tuple[dict, dict]:
     return theta, {"window_rms_before": float(np.sqrt(np.mean(r0 ** 2))),
                    "window_rms_after": float(np.sqrt(np.mean(sol.fun ** 2))),
                    "evaluations": int(sol.nfev), "status": sol.message, "std": std}
+
+
+def _steps(x, lo, hi, rel: float = DIFF_STEP) -> np.ndarray:
+    """scipy.optimize.least_squares' forward-difference steps for ``diff_step`` ``rel``
+    (scipy.optimize._numdiff: rel sign(x) |x|, sqrt(eps) sign(x) max(1, |x|) where that is no
+    step, turned back or shortened at a bound), as the step actually taken: (x + h) - x."""
+    sign = np.where(x >= 0, 1.0, -1.0)
+    h = rel * sign * np.abs(x)
+    h = np.where((x + h) - x == 0, np.sqrt(np.finfo(float).eps) * sign * np.maximum(1.0, np.abs(x)),
+                 h)
+    lower, upper = x - lo, hi - x
+    out = (x + h < lo) | (x + h > hi)
+    fitting = np.abs(h) <= np.maximum(lower, upper)
+    h = np.where(out & fitting, -h, h)
+    h = np.where(~fitting & (upper >= lower), upper, h)
+    h = np.where(~fitting & (upper < lower), -lower, h)
+    return (x + h) - x
 
 
 def refined_fit(fitted, theta: dict, std: dict, sig: dict):

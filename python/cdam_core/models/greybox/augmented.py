@@ -7,7 +7,10 @@ positions. Sample time ``dt`` is part of the model (the effects shift and differ
 
 Prediction integrates the equations forward (semi-implicit Euler, ``substeps`` per sample; the
 one integrator of the grey-box models: :mod:`cdam_core.models.greybox.freerun` runs the residual
-loop's free runs through it). The state at a row is the measured
+loop's free runs through it; its simulation windows may use RK4 instead, ``windows``). The
+equations are written once, in numpy; the rollout runs them compiled (:mod:`.trace` records
+them as a tape for ``_core.greybox_rollout``), the numpy step loop being its reference and
+fallback. The state at a row is the measured
 position and the backward difference of the last two measured positions, so ``t0 = 2``: one-step
 predicts row t from rows t-2, t-1 and the input at t-1; k-step integrates k samples from the
 state at t-k, all windows at once; free run integrates the whole segment from its first two rows.
@@ -78,6 +81,7 @@ class GreyBox(Model):
     ``aerial_manipulator``) with library effects, estimated by IDIM-LS (see the module doc)."""
 
     kind = "greybox"
+    compiled = True   # False: the numpy rollout only (the compiled path's reference)
 
     def __init__(self, declared: str = "rigid_axis", dt: float | None = None, effects=(),
                  fixed: dict | None = None, cutoff_hz: float | None = None, filter_order: int = 4,
@@ -178,21 +182,27 @@ class GreyBox(Model):
             s[p], s[p + "_d"], s[p + "_dd"] = x[:, j], v[:, j], a[:, j]
         return m.augment(s)
 
-    def _errors(self, s: dict, pre: dict, effects=None) -> np.ndarray:
-        """Equation errors (equations, W) of the states in ``s``."""
-        m, theta = self._m, self.theta_
+    def _terms(self, s: dict, pre_at: dict, effects=None) -> dict:
+        """``{equation: (y, {parameter: column})}`` at the states in ``s``; ``pre_at``: the
+        whole-record effect columns at the states' rows (``{effect key: {name: column}}``)."""
+        m = self._m
         effects = self.effects if effects is None else effects
         for e in effects:
             s = e.transform_state(s, m)
         eqs = {k: (y, dict(c)) for k, (y, c) in m.equations(s).items()}
         for e in effects:
-            if e.key in pre:   # whole-record columns, from the measured signals
-                cols = {e.channel: {n: c[s["k"]] for n, c in pre[e.key].items()}}
-            else:
-                cols = e.regressors(s, m)
+            cols = {e.channel: pre_at[e.key]} if e.key in pre_at else e.regressors(s, m)
             for eq, c in cols.items():
                 eqs[eq][1].update(c)
-        W = s[m.positions[0]].shape[0]
+        return eqs
+
+    def _errors(self, s: dict, pre: dict, effects=None, theta=None) -> np.ndarray:
+        """Equation errors (equations, W) of the states in ``s``; ``theta``: parameter values
+        (default the model's; arrays of W values give each state its own)."""
+        theta = self.theta_ if theta is None else theta
+        pre_at = {key: {n: c[s["k"]] for n, c in cols.items()} for key, cols in pre.items()}
+        eqs = self._terms(s, pre_at, effects)
+        W = s[self._m.positions[0]].shape[0]
         out = np.empty((len(eqs), W))
         for i, (y, cols) in enumerate(eqs.values()):
             r = np.broadcast_to(np.asarray(y, dtype=float), (W,)).copy()
@@ -268,7 +278,16 @@ class GreyBox(Model):
                 "eigenvalues": [[float(c.real), float(c.imag)] for c in lam]}
 
     def _choose_substeps(self) -> int:
-        """h |lambda|max <= 0.5 for the base model linearised at the zero state."""
+        """h |lambda|max <= 0.5 for the base model linearised at the zero state.
+
+        For the model kind's semi-implicit Euler this is a stability margin. For the windows'
+        Runge-Kutta 4 (:meth:`windows`) the same bound is an accuracy rule: RK4's error per
+        substep on a mode lambda is |h lambda|^5 / 120 of the state, so over one sample of n
+        substeps it is at most n |h lambda|^5 / 120 <= |dt lambda| |h lambda|^4 / 120, which at
+        |h lambda| <= 0.5 is 5e-4 |dt lambda|: three orders of magnitude below the change a
+        half-sample timing shift makes in one sample (|dt lambda| / 2). The inputs are held
+        over the sample in both (zero-order hold), which RK4 integrates without a timing error;
+        semi-implicit Euler's own timing error is half a substep."""
         lam = float(np.max(np.abs(self.linearised_eigenvalues())))
         steps = max(1, int(np.ceil(float(self.dt) * lam / 0.5)))
         if steps > MAX_SUBSTEPS:
@@ -303,16 +322,56 @@ class GreyBox(Model):
         return {e.key: e.columns(s) for e in wanted}
 
     def _rollout(self, U, Y, starts: np.ndarray, steps: int, path: bool,
-                 x0=None, v0=None, pre=None, t_start: float = 0.0) -> np.ndarray:
+                 x0=None, v0=None, pre=None, t_start: float = 0.0, integrator: str = "euler",
+                 thetas=None) -> np.ndarray:
         """Integrate ``steps`` samples from the measured state at each row of ``starts`` (or
         from positions ``x0`` and velocities ``v0``, each (W, m)); returns the final positions
         (W, m), or every step's (steps, W, m) with ``path``. ``pre``: whole-record effect
-        columns (default: from the measured ``Y``); ``t_start``: the time of row 0 (s)."""
+        columns (default: from the measured ``Y``); ``t_start``: the time of row 0 (s).
+
+        ``integrator``: "euler", the model kind's semi-implicit Euler with ``substeps_`` per
+        sample (what a saved model and the firmware run), or "rk4", classical Runge-Kutta with
+        the inputs held over the sample (zero-order hold, as the measured torque is) and the
+        same substeps (the simulation windows; see :meth:`_choose_substeps` for the accuracy).
+        ``thetas``: (G, parameters) values in the order of ``theta_``, the W lanes split into G
+        consecutive groups, each simulated with its own parameters (batched perturbations).
+
+        The equations run compiled (``_core.greybox_rollout`` on the tape that
+        :mod:`.trace` records from them) when the extension has it and the tape agrees with
+        the numpy equations on the first states; otherwise in numpy, one step at a time."""
+        if integrator not in ("euler", "rk4"):
+            raise ValueError(f"integrator: expected 'euler' or 'rk4', got {integrator!r}")
         u_all, ex_all = self._inputs(U)
         pre_all = self._precomputed(U, Y) if pre is None else pre
         dt = float(self.dt)
         x = Y[starts].astype(float) if x0 is None else np.array(x0, dtype=float)
         v = (Y[starts] - Y[starts - 1]) / dt if v0 is None else np.array(v0, dtype=float)
+        names = list(self.theta_)
+        if thetas is None:
+            th = np.array([[self.theta_[p] for p in names]])
+        else:
+            th = np.atleast_2d(np.asarray(thetas, dtype=float))
+            if th.shape[1] != len(names) or x.shape[0] % th.shape[0]:
+                raise ValueError("thetas: expected (groups, parameters), lanes a multiple of groups")
+        inv = self._inverses(th, names)
+        fast = self._compiled(u_all, ex_all, pre_all)
+        if fast is not None:
+            out = self._rollout_compiled(fast, u_all, ex_all, pre_all, starts, steps, path, x, v,
+                                         th, inv, t_start, integrator)
+            if out is not None:
+                return out
+        per = x.shape[0] // th.shape[0]
+        theta = {p: np.repeat(th[:, i], per) for i, p in enumerate(names)} \
+            if th.shape[0] > 1 else None
+        lane_inv = np.repeat(inv, per, axis=0)
+
+        def acc(x, v, u, ex, k, t):
+            zero = np.zeros_like(x)
+            e = self._errors(self._state(x, v, zero, u, ex, k, t), pre_all, theta=theta)
+            if theta is None:
+                return (self._inertia @ e).T
+            return np.einsum("wij,jw->wi", lane_inv, e)
+
         h = dt / self.substeps_
         out = np.empty((steps,) + x.shape) if path else None
         for j in range(steps):
@@ -321,13 +380,135 @@ class GreyBox(Model):
             ex = {c: a[k] for c, a in ex_all.items()}
             t = t_start + k * dt
             for _ in range(self.substeps_):
-                v = v + h * self._accel(x, v, u, ex, k, t, pre_all)
-                x = x + h * v
+                if integrator == "euler":
+                    v = v + h * acc(x, v, u, ex, k, t)
+                    x = x + h * v
+                    continue
+                a1 = acc(x, v, u, ex, k, t)
+                x2, v2 = x + 0.5 * h * v, v + 0.5 * h * a1
+                a2 = acc(x2, v2, u, ex, k, t)
+                x3, v3 = x + 0.5 * h * v2, v + 0.5 * h * a2
+                a3 = acc(x3, v3, u, ex, k, t)
+                x4, v4 = x + h * v3, v + h * a3
+                a4 = acc(x4, v4, u, ex, k, t)
+                x = x + h / 6.0 * (v + 2.0 * v2 + 2.0 * v3 + v4)
+                v = v + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
             if not np.all(np.isfinite(x)) or np.max(np.abs(x), initial=0.0) > 1e9:
                 raise ValueError(f"prediction diverged at row {int(k[0]) + 1} of the segment")
             if path:
                 out[j] = x
         return out if path else x
+
+    def _inverses(self, th: np.ndarray, names: list) -> np.ndarray:
+        """The inertia inverse of each parameter group (G, m, m)."""
+        if th.shape[0] == 1 and np.array_equal(th[0], [self.theta_[p] for p in names]):
+            return self._inertia[None].copy()
+        keep = dict(self.theta_)
+        out = []
+        try:
+            for row in th:
+                self.theta_ = dict(zip(names, map(float, row)))
+                out.append(self._inertia_matrix())
+        finally:
+            self.theta_ = keep
+        return np.array(out)
+
+    # -- the compiled path ----------------------------------------------------------------------
+    def _series_layout(self, u_all, ex_all, pre_all) -> tuple:
+        return (tuple(u_all), tuple(ex_all),
+                tuple((key, tuple(cols)) for key, cols in pre_all.items()))
+
+    def _compiled(self, u_all, ex_all, pre_all):
+        """The tape of the model's accelerations for this series layout, or None (no extension
+        function, or the equations cannot be traced)."""
+        from cdam_core.models.greybox import trace as tr
+        if not self.compiled:
+            return None
+        try:
+            from cdam_core import _core
+        except ImportError:
+            return None
+        if not hasattr(_core, "greybox_rollout") or getattr(_core, "GREYBOX_TAPE_OPS", 0) != \
+                len(tr.OPS):
+            return None
+        layout = self._series_layout(u_all, ex_all, pre_all)
+        cache = self.__dict__.setdefault("_tapes", {})
+        if layout not in cache:
+            try:
+                tape, outs = self._trace(u_all, ex_all, pre_all)
+                cache[layout] = (tape.arrays(), outs, _core.greybox_rollout, {"ok": None})
+            except (tr.TraceError, KeyError, TypeError):
+                cache[layout] = None
+        return cache[layout]
+
+    def _trace(self, u_all, ex_all, pre_all):
+        """The tape of the equation errors (:mod:`.trace`) and its output nodes; the series
+        columns are the inputs, the external columns, then the whole-record effect columns."""
+        from cdam_core.models.greybox import trace as tr
+        m = self._m
+        tape = tr.Tape()
+        col = iter(range(10 ** 9))
+        u = {name: tape.leaf("S", next(col)) for name in u_all}
+        ex = {c: tape.leaf("S", next(col)) for c in ex_all}
+        pre_at = {key: {n: tape.leaf("S", next(col)) for n in cols}
+                  for key, cols in pre_all.items()}
+        s = {"t": tape.leaf("T", 0), "extra": ex, "k": None, "dt": float(self.dt)}
+        s.update(u)
+        for j, p in enumerate(m.positions):
+            s[p], s[p + "_d"], s[p + "_dd"] = tape.leaf("X", j), tape.leaf("V", j), 0.0
+        s = m.augment(s)
+        eqs = self._terms(s, pre_at)
+        index = {p: i for i, p in enumerate(self.theta_)}
+        outs = []
+        for y, cols in eqs.values():
+            r = tr._as_sym(tape, y)
+            for p, c in cols.items():
+                r = r - tape.leaf("P", index[p]) * tr._as_sym(tape, c)
+            outs.append(r.i)
+        if len(outs) != len(m.positions):
+            raise tr.TraceError("equations and positions differ in number")
+        return tape, np.array(outs, dtype=np.int32)
+
+    def _rollout_compiled(self, fast, u_all, ex_all, pre_all, starts, steps, path, x, v, th,
+                          inv, t_start, integrator):
+        (op, a, b, c), outs, run, state = fast
+        cols = list(u_all.values()) + list(ex_all.values()) + \
+            [col for cols in pre_all.values() for col in cols.values()]
+        series = np.column_stack([np.asarray(cc, dtype=float) for cc in cols])
+        st = np.asarray(starts, dtype=np.int64)
+        if st.size != x.shape[0]:
+            st = np.broadcast_to(st, (x.shape[0],)).copy()
+        per = x.shape[0] // th.shape[0]
+        if state["ok"] is None:   # the tape against the numpy equations on the first states
+            lanes = np.arange(min(x.shape[0], 8))
+            g = lanes // per
+            # one Euler step of length 1 from (x, v) gives x + v + a: the acceleration itself
+            x1, _ = run(op, a, b, c, outs, series, th[g], inv[g], x[lanes], v[lanes], st[lanes],
+                        1, 1, False, 1.0, float(t_start), False)
+            got = x1 - x[lanes] - v[lanes]
+            names = list(self.theta_)
+            theta = {p: th[g, i] for i, p in enumerate(names)}
+            u = {name: col[st[lanes]] for name, col in u_all.items()}
+            ex = {cc: col[st[lanes]] for cc, col in ex_all.items()}
+            keep_dt = self.dt
+            try:
+                self.dt = 1.0    # the tape's time leaf and the check share the step
+                e = self._errors(self._state(x[lanes], v[lanes], np.zeros_like(x[lanes]), u, ex,
+                                             st[lanes], t_start + st[lanes] * 1.0),
+                                 pre_all, theta=theta)
+            finally:
+                self.dt = keep_dt
+            want = np.einsum("wij,jw->wi", inv[g], e)
+            tol = 1e-8 * (np.abs(want) + np.abs(x[lanes]) + np.abs(v[lanes])) + 1e-300
+            state["ok"] = bool(np.all(np.isfinite(want)) and np.all(np.abs(got - want) <= tol))
+        if not state["ok"]:
+            return None
+        P, diverged = run(op, a, b, c, outs, series, th, inv, x, v, st, int(steps),
+                          int(self.substeps_), integrator == "rk4", float(self.dt),
+                          float(t_start), bool(path))
+        if diverged >= 0:
+            raise ValueError(f"prediction diverged at row {int(diverged)} of the segment")
+        return P
 
     @property
     def declared_model(self):
@@ -353,11 +534,21 @@ class GreyBox(Model):
         self._inertia = self._inertia_matrix()
         return self
 
-    def windows(self, U, Y, starts, steps: int, x0=None, v0=None) -> np.ndarray:
+    def windows(self, U, Y, starts, steps: int, x0=None, v0=None, integrator: str = "euler",
+                thetas=None) -> np.ndarray:
         """Simulate ``steps`` samples from the measured state at each row of ``starts`` (one
         segment ``U``, ``Y``: multiple shooting windows), or from the given positions ``x0``
         and velocities ``v0`` (each (len(starts), outputs)); returns the simulated positions
-        (steps, len(starts), outputs) of rows ``start + 1 .. start + steps``."""
+        (steps, len(starts), outputs) of rows ``start + 1 .. start + steps``.
+
+        ``integrator``: "euler" (default: the model kind's semi-implicit Euler, what a saved
+        model and the firmware run; its timing error is half a substep) or "rk4" (Runge-Kutta
+        4 with the inputs held over the sample: a window's integration error far below the
+        half-sample effects its scores may decide on, see :meth:`_choose_substeps`).
+        ``thetas``: (G, parameters) in the order of :meth:`parameters`; the windows are split
+        into G consecutive groups, each simulated with its own parameter values (a batched
+        finite-difference Jacobian).
+        """
         self._check_fitted()
         U, Y = as_2d(U, "U"), as_2d(Y, "Y")
         if U.shape != (Y.shape[0], self.n_inputs_) or Y.shape[1] != self.n_outputs_:
@@ -374,7 +565,14 @@ class GreyBox(Model):
         for name, a in (("x0", x0), ("v0", v0)):
             if a is not None and (np.shape(a) != W or not np.all(np.isfinite(a))):
                 raise ValueError(f"{name}: expected finite values of shape {W}")
-        return self._rollout(U, Y, starts, steps, True, x0, v0)
+        if thetas is not None:
+            th = np.asarray(thetas, dtype=float)
+            if (th.ndim != 2 or th.shape[1] != len(self.theta_) or th.shape[0] < 1
+                    or starts.size % th.shape[0] or not np.all(np.isfinite(th))):
+                raise ValueError(f"thetas: expected finite (groups, {len(self.theta_)}) values "
+                                 f"with the {starts.size} windows a multiple of the groups")
+        return self._rollout(U, Y, starts, steps, True, x0, v0, integrator=integrator,
+                             thetas=thetas)
 
     def _one_step(self, U, Y):
         return self._k_step(U, Y, 1)[self.t0:]

@@ -15,6 +15,7 @@ import numpy as np
 from scipy import signal as sps
 
 from cdam_core.base.signals import as_signal, as_time, positive
+from cdam_core.models.greybox.trace import floats
 from cdam_core.record.units import STANDARD_UNITS, check_model_units, same_unit
 
 INF = float("inf")
@@ -277,7 +278,7 @@ class RigidAxis(GreyBoxModel):
                                  f"rad")
 
     def equations(self, s: dict) -> dict:
-        one = np.ones_like(np.asarray(s["q_d"], dtype=float))
+        one = np.ones_like(floats(s["q_d"]))
         return {"tau": (s["tau"], {"M": s["q_dd"], "Fv": s["q_d"], "offset": one})}
 
 
@@ -312,7 +313,7 @@ class FlexibleJoint(GreyBoxModel):
 
     def equations(self, s: dict) -> dict:
         d, dd = s["defl"], s["defl_d"]
-        zero = np.zeros_like(np.asarray(d, dtype=float))
+        zero = np.zeros_like(floats(d))
         motor = {"Im": s["theta_m_dd"], "Dm": s["theta_m_d"], "Ks": d, "Kd": dd}
         link = {"I": s["q_dd"], "Dl": s["q_d"], "G": np.sin(s["q"]), "Ks": -d, "Kd": -dd}
         return {"tau_m": (s["tau_m"], motor), "tau_l": (zero, link)}

@@ -15,12 +15,14 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from cdam_core.models.greybox.trace import floats
+
 G0 = 9.81
 
 
 def smooth_sign(v, eps: float):
     """sign(v), or tanh(v / eps) when ``eps`` > 0 (a smoothed sign)."""
-    return np.sign(v) if eps <= 0 else np.tanh(np.asarray(v) / eps)
+    return np.sign(v) if eps <= 0 else np.tanh(floats(v) / eps)
 
 
 @dataclass(frozen=True)
@@ -156,7 +158,7 @@ class AsymmetricFriction(Effect):
         return self.channel in model.offset and model.offset[self.channel] not in model.fixed
 
     def regressors(self, s, model):
-        v = np.asarray(s[model.viscous[self.channel][1]], dtype=float)
+        v = floats(s[model.viscous[self.channel][1]])
         pos = (v > 0).astype(float)
         cols = {_p(self, "dFv"): v * pos}
         if not self._has_offset(model):
@@ -215,7 +217,7 @@ class HardeningStiffness(Effect):
 
     def regressors(self, s, model):
         motor, defl = model.cables[self.channel][:2]
-        d3 = np.asarray(s[defl], dtype=float) ** 3
+        d3 = floats(s[defl]) ** 3
         return {motor: {_p(self, "K3"): d3}, self.channel: {_p(self, "K3"): -d3}}
 
 
@@ -318,7 +320,7 @@ class ExternalForce(Effect):
         return self.channel in model.equation_names
 
     def regressors(self, s, model):
-        return {self.channel: {_p(self, "gain"): -np.asarray(s["extra"][self.column], dtype=float)}}
+        return {self.channel: {_p(self, "gain"): -floats(s["extra"][self.column])}}
 
     def parameters(self, theta, model):
         out = super().parameters(theta, model)
@@ -349,7 +351,7 @@ class GroundEffect(Effect):
         return model.name in _QUAD and self.channel == "Z"
 
     def regressors(self, s, model):
-        z = np.maximum(np.asarray(s["Z"], dtype=float), 0.05)
+        z = np.maximum(floats(s["Z"]), 0.05)
         return {"Z": {_p(self, "k"): -_vertical_thrust(s) * (self.rotor_radius / (4 * z)) ** 2}}
 
 

@@ -1,0 +1,109 @@
+"""Benchmark of [speed] issue 23 item 4: the grey-box rollouts of the residual loop, compiled
+(the model's numpy equations traced once into a tape, ``_core.greybox_rollout``) against the
+numpy path they replace (one Python step per sample, every window at once), in the same process,
+on EMPS (DATA_EMPS, the final model: rigid axis + Coulomb + asymmetric friction):
+
+- ``greybox_free_run``: the model kind's free run over DATA_EMPS (24,841 samples, one lane):
+  the path of ``cdam residual``'s free runs and of the benchmark protocol's score.
+- ``greybox_windows``: the held-out validation windows (by RK4), each window's initial state
+  perturbed (3 lanes per window), as ``BlockedCV._shooting`` runs them.
+- ``greybox_oe_jacobian``: one output-error Jacobian over the training windows: the base
+  point and one group of lanes per parameter in one rollout, against the numpy path running
+  them one column after the other (what scipy's finite differences did).
+
+"ratio" is numpy over compiled; the numpy path is the fairest reference we have (already
+vectorised over windows; what remains is sequential in time). Thread CPU time, best of N."""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from timing import best_of
+
+
+def _emps_model():
+    from cdam_core.models.greybox.augmented import GreyBox
+    from cdam_core.models.greybox.effects import AsymmetricFriction, CoulombFriction
+    from cdam_core.record.realdata.emps import load_emps
+    d = load_emps("DATA_EMPS")
+    U, Y = d["force"][:, None], d["qm"][:, None]
+    g = GreyBox("rigid_axis", float(np.mean(np.diff(d["t"]))),
+                [CoulombFriction("tau"), AsymmetricFriction("tau")], cutoff_hz=400.0)
+    g.fit(U, Y)
+    return g, U, Y
+
+
+def _numpy_twin(g):
+    from cdam_core.models.greybox.augmented import GreyBox
+    h = GreyBox.from_dict(g.to_dict())
+    h.compiled = False
+    return h
+
+
+def _entry(fast, slow, repeats_fast=5, repeats_slow=1, what="") -> dict:
+    a = fast()
+    b = slow()
+    diff = float(np.max(np.abs(np.asarray(a) - np.asarray(b))))
+    tf = best_of(fast, repeats_fast, time.thread_time)
+    ts = best_of(slow, repeats_slow, time.thread_time)
+    return {"seconds": tf, "reference_seconds": ts, "ratio": ts / tf,
+            "reference": f"the numpy rollout ({what})", "max_abs_difference": diff}
+
+
+def free_run() -> dict:
+    g, U, Y = _emps_model()
+    h = _numpy_twin(g)
+    out = _entry(lambda: g.predict(U, Y, mode="free_run"),
+                 lambda: h.predict(U, Y, mode="free_run"), what="one Python step per sample")
+    out.update(samples=int(Y.shape[0]), substeps=int(g.substeps_))
+    return out
+
+
+def _windows_case():
+    """The EMPS model, its numpy twin and the validation windows of ``cdam residual`` on
+    DATA_EMPS (horizon 621 samples, the motion's correlation time), 3 lanes per window."""
+    g, U, Y = _emps_model()
+    H = 621
+    starts = np.arange(50, Y.shape[0] - H - 50, H)
+    return g, _numpy_twin(g), U, Y, starts, np.tile(starts, 3), H
+
+
+def windows() -> dict:
+    g, h, U, Y, starts, lanes, H = _windows_case()
+    out = _entry(lambda: g.windows(U, Y, lanes, H, integrator="rk4"),
+                 lambda: h.windows(U, Y, lanes, H, integrator="rk4"),
+                 what="RK4, every window at once")
+    out.update(windows=int(starts.size), lanes=int(lanes.size), horizon=H)
+    return out
+
+
+def oe_jacobian() -> dict:
+    g, h, U, Y, starts, lanes, H = _windows_case()
+    names = list(g.theta_)
+    base = np.array([g.theta_[p] for p in names])
+    est = [names.index(p) for p in g.estimated_]
+    TH = np.tile(base, (len(est) + 1, 1))
+    for j, i in enumerate(est):
+        TH[j + 1, i] *= 1 + 1e-4
+
+    def batched():
+        return g.windows(U, Y, np.tile(lanes, TH.shape[0]), H, thetas=TH)
+
+    def columns():
+        out = []
+        for row in TH:
+            h.set_parameters(dict(zip(names, row)))
+            out.append(h.windows(U, Y, lanes, H))
+        return np.concatenate(out, axis=1)
+    res = _entry(batched, columns, what="one rollout per Jacobian column")
+    res.update(parameters=len(est), lanes=int(lanes.size * TH.shape[0]))
+    return res
+
+
+BENCHMARKS = {"greybox_free_run": free_run, "greybox_windows": windows,
+              "greybox_oe_jacobian": oe_jacobian}
+
+if __name__ == "__main__":
+    for k, fn in BENCHMARKS.items():
+        print(k, fn())

@@ -1,0 +1,248 @@
+// Bindings: the grey-box rollout (python/cdam_core/models/greybox/augmented.py). The model's
+// accelerations arrive as a tape of operations recorded from its numpy equations
+// (models/greybox/trace.py); this file evaluates the tape for every lane (window or parameter
+// perturbation), sample, substep and stage: semi-implicit Euler (the model kind's integrator,
+// as on the firmware) or classical Runge-Kutta 4 with the inputs held over the sample.
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <string>
+#include <vector>
+
+#include "common.hpp"
+
+namespace py = pybind11;
+using cdam::bind::value_error;
+
+namespace {
+
+// keep in the order of trace.OPS
+enum Op : int {
+  kC, kX, kV, kS, kT, kP, kAdd, kSub, kMul, kDiv, kNeg, kSign, kTanh, kSin, kCos, kAbs, kMax,
+  kMin, kGt, kLt, kGe, kLe, kPow, kExp, kSqrt, kNumOps
+};
+
+double sign_of(double x) { return x > 0 ? 1.0 : (x < 0 ? -1.0 : (x == 0 ? 0.0 : x)); }
+double max_of(double a, double b) { return (a != a || b != b) ? NAN : (a >= b ? a : b); }
+double min_of(double a, double b) { return (a != a || b != b) ? NAN : (a <= b ? a : b); }
+
+struct Tape {
+  const int* op;
+  const int* a;
+  const int* b;
+  const double* c;
+  int nodes;
+  const int* out;   // equation error nodes, one per position
+  int n;            // positions
+};
+
+constexpr int kChunk = 32;   // lanes evaluated together (inner loops over lanes)
+
+// Accelerations of a chunk of B lanes at (x, v) (structure of arrays: x[i * kChunk + l]).
+// reg holds nodes x kChunk values; srow[l] the series row of lane l, th[l] its parameters and
+// inv[l] its inertia inverse (n x n, row-major).
+void accel(const Tape& tp, int B, const double* x, const double* v, const double* const* srow,
+           const double* t, const double* const* th, const double* const* inv, double* reg,
+           double* acc) {
+  for (int i = 0; i < tp.nodes; ++i) {
+    double* y = reg + static_cast<std::size_t>(i) * kChunk;
+    const double* ra = tp.a[i] >= 0 ? reg + static_cast<std::size_t>(tp.a[i]) * kChunk : nullptr;
+    const double* rb = tp.b[i] >= 0 ? reg + static_cast<std::size_t>(tp.b[i]) * kChunk : nullptr;
+    const int ci = static_cast<int>(tp.c[i]);
+    switch (tp.op[i]) {
+      case kC: for (int l = 0; l < B; ++l) y[l] = tp.c[i]; break;
+      case kX: for (int l = 0; l < B; ++l) y[l] = x[ci * kChunk + l]; break;
+      case kV: for (int l = 0; l < B; ++l) y[l] = v[ci * kChunk + l]; break;
+      case kS: for (int l = 0; l < B; ++l) y[l] = srow[l][ci]; break;
+      case kT: for (int l = 0; l < B; ++l) y[l] = t[l]; break;
+      case kP: for (int l = 0; l < B; ++l) y[l] = th[l][ci]; break;
+      case kAdd: for (int l = 0; l < B; ++l) y[l] = ra[l] + rb[l]; break;
+      case kSub: for (int l = 0; l < B; ++l) y[l] = ra[l] - rb[l]; break;
+      case kMul: for (int l = 0; l < B; ++l) y[l] = ra[l] * rb[l]; break;
+      case kDiv: for (int l = 0; l < B; ++l) y[l] = ra[l] / rb[l]; break;
+      case kNeg: for (int l = 0; l < B; ++l) y[l] = -ra[l]; break;
+      case kSign: for (int l = 0; l < B; ++l) y[l] = sign_of(ra[l]); break;
+      case kTanh: for (int l = 0; l < B; ++l) y[l] = std::tanh(ra[l]); break;
+      case kSin: for (int l = 0; l < B; ++l) y[l] = std::sin(ra[l]); break;
+      case kCos: for (int l = 0; l < B; ++l) y[l] = std::cos(ra[l]); break;
+      case kAbs: for (int l = 0; l < B; ++l) y[l] = std::fabs(ra[l]); break;
+      case kMax: for (int l = 0; l < B; ++l) y[l] = max_of(ra[l], rb[l]); break;
+      case kMin: for (int l = 0; l < B; ++l) y[l] = min_of(ra[l], rb[l]); break;
+      case kGt: for (int l = 0; l < B; ++l) y[l] = ra[l] > rb[l] ? 1.0 : 0.0; break;
+      case kLt: for (int l = 0; l < B; ++l) y[l] = ra[l] < rb[l] ? 1.0 : 0.0; break;
+      case kGe: for (int l = 0; l < B; ++l) y[l] = ra[l] >= rb[l] ? 1.0 : 0.0; break;
+      case kLe: for (int l = 0; l < B; ++l) y[l] = ra[l] <= rb[l] ? 1.0 : 0.0; break;
+      case kPow: for (int l = 0; l < B; ++l) y[l] = std::pow(ra[l], rb[l]); break;
+      case kExp: for (int l = 0; l < B; ++l) y[l] = std::exp(ra[l]); break;
+      case kSqrt: for (int l = 0; l < B; ++l) y[l] = std::sqrt(ra[l]); break;
+      default: for (int l = 0; l < B; ++l) y[l] = NAN;
+    }
+  }
+  const int n = tp.n;
+  for (int i = 0; i < n; ++i)
+    for (int l = 0; l < B; ++l) {
+      double s = 0.0;
+      for (int j = 0; j < n; ++j)
+        s += inv[l][i * n + j] * reg[static_cast<std::size_t>(tp.out[j]) * kChunk + l];
+      acc[i * kChunk + l] = s;
+    }
+}
+
+}  // namespace
+
+void register_greybox(py::module_& m) {
+  m.attr("GREYBOX_TAPE_OPS") = static_cast<int>(kNumOps);
+  m.def(
+      "greybox_rollout",
+      [](py::array_t<int, py::array::c_style | py::array::forcecast> op,
+         py::array_t<int, py::array::c_style | py::array::forcecast> a,
+         py::array_t<int, py::array::c_style | py::array::forcecast> b,
+         py::array_t<double, py::array::c_style | py::array::forcecast> c,
+         py::array_t<int, py::array::c_style | py::array::forcecast> outputs,
+         py::array_t<double, py::array::c_style | py::array::forcecast> series,
+         py::array_t<double, py::array::c_style | py::array::forcecast> theta,
+         py::array_t<double, py::array::c_style | py::array::forcecast> inverse,
+         py::array_t<double, py::array::c_style | py::array::forcecast> x0,
+         py::array_t<double, py::array::c_style | py::array::forcecast> v0,
+         py::array_t<long long, py::array::c_style | py::array::forcecast> starts, long long steps,
+         long long substeps, bool rk4, double dt, double t_start, bool path) {
+        const py::ssize_t nodes = op.size();
+        if (nodes == 0 || a.size() != nodes || b.size() != nodes || c.size() != nodes)
+          value_error("tape: op, a, b and c must be non-empty and of one length");
+        if (x0.ndim() != 2 || v0.ndim() != 2 || x0.shape(0) != v0.shape(0) ||
+            x0.shape(1) != v0.shape(1))
+          value_error("x0, v0: expected two arrays of shape (lanes, positions)");
+        const int L = static_cast<int>(x0.shape(0)), n = static_cast<int>(x0.shape(1));
+        if (L < 1 || n < 1) value_error("x0: no lanes or no positions");
+        if (outputs.size() != n) value_error("outputs: one equation per position expected");
+        if (series.ndim() != 2 || series.shape(0) < 1) value_error("series: expected (rows, columns)");
+        if (theta.ndim() != 2 || theta.shape(0) < 1 || L % theta.shape(0) != 0)
+          value_error("theta: expected (groups, parameters) with lanes a multiple of groups");
+        const int G = static_cast<int>(theta.shape(0)), P = static_cast<int>(theta.shape(1));
+        if (inverse.ndim() != 3 || inverse.shape(0) != G || inverse.shape(1) != n ||
+            inverse.shape(2) != n)
+          value_error("inverse: expected (groups, positions, positions)");
+        if (starts.size() != L) value_error("starts: one row per lane expected");
+        if (steps < 1 || substeps < 1 || substeps > 100000) value_error("steps/substeps: >= 1");
+        if (!(dt > 0) || !std::isfinite(dt)) value_error("dt: must be positive and finite");
+        const py::ssize_t N = series.shape(0), S = series.shape(1);
+        const int* opp = op.data();
+        const int* ap = a.data();
+        const int* bp = b.data();
+        const double* cp = c.data();
+        for (py::ssize_t i = 0; i < nodes; ++i) {
+          if (opp[i] < 0 || opp[i] >= kNumOps) value_error("tape: unknown operation");
+          const bool leaf = opp[i] <= kP;
+          if (!leaf && (ap[i] < 0 || ap[i] >= i || bp[i] >= i)) value_error("tape: bad operand");
+          const double lim = opp[i] == kX || opp[i] == kV ? n : opp[i] == kS ? S : opp[i] == kP ? P : 1;
+          if ((opp[i] == kX || opp[i] == kV || opp[i] == kS || opp[i] == kP) &&
+              !(cp[i] >= 0 && cp[i] < lim))
+            value_error("tape: leaf index out of range");
+          if (opp[i] >= kAdd && opp[i] != kNeg && opp[i] < kNumOps && opp[i] != kSign &&
+              opp[i] != kTanh && opp[i] != kSin && opp[i] != kCos && opp[i] != kAbs &&
+              opp[i] != kExp && opp[i] != kSqrt && bp[i] < 0)
+            value_error("tape: binary operation without a second operand");
+        }
+        for (py::ssize_t q = 0; q < n; ++q)
+          if (outputs.data()[q] < 0 || outputs.data()[q] >= nodes) value_error("outputs: bad node");
+        const long long* st = starts.data();
+        for (int l = 0; l < L; ++l)
+          if (st[l] < 0 || st[l] + steps > N) value_error("starts/steps: rows outside the series");
+        const Tape tp{opp, ap, bp, cp, static_cast<int>(nodes), outputs.data(), n};
+        const int per = L / G;
+        py::array_t<double> result =
+            path ? py::array_t<double>({static_cast<py::ssize_t>(steps), static_cast<py::ssize_t>(L),
+                                        static_cast<py::ssize_t>(n)})
+                 : py::array_t<double>({static_cast<py::ssize_t>(L), static_cast<py::ssize_t>(n)});
+        double* res = result.mutable_data();
+        const double* X0 = x0.data();
+        const double* V0 = v0.data();
+        const double* ser = series.data();
+        const double h = dt / static_cast<double>(substeps);
+        long long diverged = -1, limit = steps;   // the first step at which a lane diverged
+        const std::size_t cn = static_cast<std::size_t>(n) * kChunk;
+        std::vector<double> reg(static_cast<std::size_t>(nodes) * kChunk);
+        std::vector<double> x(cn), v(cn), xs(cn), vs(cn), k1(cn), k2(cn), k3(cn), k4(cn), l2(cn),
+            l3(cn), tt(kChunk);
+        std::vector<const double*> srow(kChunk), th(kChunk), inv(kChunk);
+        for (int l0 = 0; l0 < L; l0 += kChunk) {
+          const int B = std::min(kChunk, L - l0);
+          for (int l = 0; l < B; ++l) {
+            th[l] = theta.data() + ((l0 + l) / per) * P;
+            inv[l] = inverse.data() + ((l0 + l) / per) * n * n;
+            for (int i = 0; i < n; ++i) {
+              x[i * kChunk + l] = X0[(l0 + l) * n + i];
+              v[i * kChunk + l] = V0[(l0 + l) * n + i];
+            }
+          }
+          for (long long j = 0; j < limit; ++j) {
+            for (int l = 0; l < B; ++l) {
+              const long long k = st[l0 + l] + j;
+              srow[l] = ser + k * S;
+              tt[l] = t_start + static_cast<double>(k) * dt;
+            }
+            for (long long s = 0; s < substeps; ++s) {
+              if (!rk4) {   // semi-implicit Euler: v += h a(x, v); x += h v
+                accel(tp, B, x.data(), v.data(), srow.data(), tt.data(), th.data(), inv.data(),
+                      reg.data(), k1.data());
+                for (int i = 0; i < n; ++i)
+                  for (int l = 0; l < B; ++l) {
+                    const std::size_t q = i * kChunk + l;
+                    v[q] = v[q] + h * k1[q];
+                    x[q] = x[q] + h * v[q];
+                  }
+                continue;
+              }
+              // RK4 on (x, v)' = (v, a(x, v)), the inputs held over the sample
+              accel(tp, B, x.data(), v.data(), srow.data(), tt.data(), th.data(), inv.data(),
+                    reg.data(), k1.data());
+              for (std::size_t q = 0; q < cn; ++q) {
+                xs[q] = x[q] + 0.5 * h * v[q];
+                vs[q] = v[q] + 0.5 * h * k1[q];
+              }
+              l2 = vs;
+              accel(tp, B, xs.data(), vs.data(), srow.data(), tt.data(), th.data(), inv.data(),
+                    reg.data(), k2.data());
+              for (std::size_t q = 0; q < cn; ++q) {
+                xs[q] = x[q] + 0.5 * h * l2[q];
+                vs[q] = v[q] + 0.5 * h * k2[q];
+              }
+              l3 = vs;
+              accel(tp, B, xs.data(), vs.data(), srow.data(), tt.data(), th.data(), inv.data(),
+                    reg.data(), k3.data());
+              for (std::size_t q = 0; q < cn; ++q) {
+                xs[q] = x[q] + h * l3[q];
+                vs[q] = v[q] + h * k3[q];
+              }
+              accel(tp, B, xs.data(), vs.data(), srow.data(), tt.data(), th.data(), inv.data(),
+                    reg.data(), k4.data());
+              for (std::size_t q = 0; q < cn; ++q) {
+                x[q] = x[q] + h / 6.0 * (v[q] + 2.0 * l2[q] + 2.0 * l3[q] + vs[q]);
+                v[q] = v[q] + h / 6.0 * (k1[q] + 2.0 * k2[q] + 2.0 * k3[q] + k4[q]);
+              }
+            }
+            for (int i = 0; i < n; ++i)
+              for (int l = 0; l < B; ++l) {
+                const double xi = x[i * kChunk + l];
+                if (!std::isfinite(xi) || std::fabs(xi) > 1e9) limit = j;
+                if (path) res[(j * L + l0 + l) * n + i] = xi;
+              }
+          }
+          if (!path)
+            for (int l = 0; l < B; ++l)
+              for (int i = 0; i < n; ++i) res[(l0 + l) * n + i] = x[i * kChunk + l];
+        }
+        if (limit < steps) diverged = st[0] + limit + 1;
+        return py::make_tuple(result, diverged);
+      },
+      py::arg("op"), py::arg("a"), py::arg("b"), py::arg("c"), py::arg("outputs"),
+      py::arg("series"), py::arg("theta"), py::arg("inverse"), py::arg("x0"), py::arg("v0"),
+      py::arg("starts"), py::arg("steps"), py::arg("substeps"), py::arg("rk4"), py::arg("dt"),
+      py::arg("t_start"), py::arg("path"),
+      "Integrate a grey-box model given as a tape (models/greybox/trace.py) over every lane; "
+      "returns (positions, diverged row or -1): (steps, lanes, positions) with path, else "
+      "(lanes, positions).");
+}
