@@ -46,3 +46,19 @@ def test_options_are_checked(tmp_path, capsys, extra, message):
         if "quad_hybrid" in extra else [str(csv), "--inputs", "u", "--outputs", "y"]
     assert main(["identify", *flights, *extra, "--quiet"]) == 2
     assert message in capsys.readouterr().err
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not (FLIGHTS / "square_20251017_run2.parquet").is_file(),
+                    reason=f"nano-drone flights not found at {FLIGHTS} (set CDAM_SHARED_DATA)")
+def test_hybrid_fold_chooses_on_validation_and_scores_beside_the_baselines():
+    from cdam_core.evaluate.crossfold import hybrid_fold
+    from cdam_core.record.realdata.nanodrone import nanodrone_files
+    grid = {"hold": {"prior": "hold"}, "dynamic": {"prior": "dynamic"}}
+    r = hybrid_fold(nanodrone_files(), "square", grid=grid, horizon=3,
+                    fixed={"hidden": 2, "lags": 1, "epochs": 1, "horizon": 5},
+                    arx_grid=[(1, 1, 1)])
+    assert r["chosen"] == min(r["validation"], key=r["validation"].get)
+    g = r["fold"].scores.group_rmse
+    assert {"naive", "arx", "physics_hold", "hybrid"} <= set(g)
+    assert g["hybrid"].shape == g["naive"].shape == (3, 4)

@@ -187,14 +187,16 @@ HYBRID_FIXED = {"hidden": 8, "lags": 6, "epochs": 15}
 
 
 def hybrid_fold(files, test_type: str, grid=None, fixed=None, horizon: int = 50,
-                select_horizons=(1, 10, 25, 50), loaded: dict | None = None) -> dict:
+                select_horizons=(1, 10, 25, 50), loaded: dict | None = None,
+                arx_grid=ARX_GRID) -> dict:
     """The physics + network model on one fold: each structure of ``grid`` (name -> QuadHybrid
     arguments over ``fixed``; default ``HYBRID_GRID``, ``HYBRID_FIXED``) is trained on the fit
     flights and scored on the validation flights (the last run of each training type) by the
     mean over ``select_horizons`` and groups of its MAE over the naive MAE; the least is chosen,
     retrained on all training flights and scored on the test type at every horizon
     1..``horizon`` beside the fold's baselines (``cross_trajectory_fold``: naive, ARX(1), the
-    chosen ARX, the physics model with rates integrated and held), all on the same rows.
+    chosen ARX (orders from ``arx_grid``), the physics model with rates integrated and held),
+    all on the same rows.
     Returns {"fold": Fold (the hybrid's scores under "hybrid"), "chosen", "validation",
     "fit_seconds"}."""
     import time
@@ -226,8 +228,8 @@ def hybrid_fold(files, test_type: str, grid=None, fixed=None, horizon: int = 50,
     model = QuadHybrid(dt=dt, **{**fixed, **grid[chosen]}).fit(st_train.U, st_train.Y,
                                                                  segments=st_train.lengths)
     fit_seconds = time.perf_counter() - t
-    fold = cross_trajectory_fold(files, test_type, horizon=horizon, loaded=loaded,
-                                 extra={"hybrid": model})
+    fold = cross_trajectory_fold(files, test_type, horizon=horizon, grid=arx_grid,
+                                 loaded=loaded, extra={"hybrid": model})
     return {"fold": fold, "chosen": chosen, "structure": {**fixed, **grid[chosen]},
             "validation": val, "fit_seconds": fit_seconds,
             "history": model.history_}
