@@ -51,14 +51,14 @@ Windows windows(const py::array& S, const py::array& E, const py::array& Dr,
 
 struct Problem {
   Windows w;
-  Arr in_mean, in_scale, out_scale, err_scale;
+  Arr in_mean, in_scale, out_scale, err_scale, step_weight;
   host::KStepShape sh;
 };
 
 Problem problem(const py::array& S, const py::array& E, const py::array& Dr,
                 const py::array& starts, long long K, long long hidden, const py::array& in_mean,
                 const py::array& in_scale, const py::array& out_scale,
-                const py::array& err_scale) {
+                const py::array& err_scale, const py::object& step_weight) {
   const int k = int_arg(K, "K", 1, 100000);
   const int H = int_arg(hidden, "hidden", 1, 100000);
   Problem p;
@@ -74,6 +74,12 @@ Problem problem(const py::array& S, const py::array& E, const py::array& Dr,
   p.sh = host::KStepShape{static_cast<Index>(ns), static_cast<Index>(p.w.E.shape(1)), H, k,
                           p.in_mean.data(), p.in_scale.data(), p.out_scale.data(),
                           p.err_scale.data()};
+  if (!step_weight.is_none()) {
+    p.step_weight = vector<double>(step_weight.cast<py::array>(), "step_weight", k);
+    for (int j = 0; j < k; ++j)
+      if (!(p.step_weight.data()[j] > 0)) value_error("step_weight: every weight must be > 0");
+    p.sh.step_weight = p.step_weight.data();
+  }
   return p;
 }
 
@@ -92,8 +98,9 @@ void register_kstep(py::module_& m) {
                              const py::array& Dr, const py::array& starts, long long K,
                              long long hidden, const py::array& in_mean,
                              const py::array& in_scale, const py::array& out_scale,
-                             const py::array& err_scale) {
-    Problem p = problem(S, E, Dr, starts, K, hidden, in_mean, in_scale, out_scale, err_scale);
+                             const py::array& err_scale, const py::object& step_weight) {
+    Problem p = problem(S, E, Dr, starts, K, hidden, in_mean, in_scale, out_scale, err_scale,
+                        step_weight);
     Arr th = theta_of(theta, p.sh);
     const Index R = p.sh.K * p.sh.ns, D = p.sh.dim(), W = p.w.d.W;
     Arr e({static_cast<py::ssize_t>(W * R)});
@@ -104,16 +111,18 @@ void register_kstep(py::module_& m) {
     return py::make_tuple(e, J);
   }, py::arg("theta"), py::arg("S"), py::arg("E"), py::arg("D"), py::arg("starts"),
      py::arg("K"), py::arg("hidden"), py::arg("in_mean"), py::arg("in_scale"),
-     py::arg("out_scale"), py::arg("err_scale"),
+     py::arg("out_scale"), py::arg("err_scale"), py::arg("step_weight") = py::none(),
      "(e, J) of the K-step windows: e (W K ns) the scaled errors, row (w K + j) ns + i for "
-     "step j + 1 of window w; J (W K ns, D) = d y_hat / d theta / err_scale by forward "
+     "step j + 1 of window w, times step_weight[j] (K weights; None: 1); J (W K ns, D) = "
+     "d y_hat / d theta step_weight / err_scale by forward "
      "sensitivities (cdam/host/kstep.hpp).");
   m.def("kstep_normal", [](const py::array& theta, const py::array& S, const py::array& E,
                            const py::array& Dr, const py::array& starts, long long K,
                            long long hidden, const py::array& in_mean, const py::array& in_scale,
                            const py::array& out_scale, const py::array& err_scale,
-                           long long threads) {
-    Problem p = problem(S, E, Dr, starts, K, hidden, in_mean, in_scale, out_scale, err_scale);
+                           const py::object& step_weight, long long threads) {
+    Problem p = problem(S, E, Dr, starts, K, hidden, in_mean, in_scale, out_scale, err_scale,
+                        step_weight);
     Arr th = theta_of(theta, p.sh);
     const int nt = int_arg(threads, "threads", 1, 256);
     const Index D = p.sh.dim();
@@ -128,7 +137,8 @@ void register_kstep(py::module_& m) {
     return py::make_tuple(jtj, jte, sse);
   }, py::arg("theta"), py::arg("S"), py::arg("E"), py::arg("D"), py::arg("starts"),
      py::arg("K"), py::arg("hidden"), py::arg("in_mean"), py::arg("in_scale"),
-     py::arg("out_scale"), py::arg("err_scale"), py::arg("threads") = 1,
+     py::arg("out_scale"), py::arg("err_scale"), py::arg("step_weight") = py::none(),
+     py::arg("threads") = 1,
      "(J'J, J'e, sse) over the K-step windows, without forming J; bit-identical for any "
      "thread count.");
   m.def("kstep_train_lm", [](const py::array& theta0, const py::array& S, const py::array& E,
@@ -137,8 +147,10 @@ void register_kstep(py::module_& m) {
                              const py::array& in_scale, const py::array& out_scale,
                              const py::array& err_scale, long long epochs, double mu,
                              double mu_dec, double mu_inc, double mu_max, double min_grad,
-                             long long max_fail, const py::object& val, long long threads) {
-    Problem p = problem(S, E, Dr, starts, K, hidden, in_mean, in_scale, out_scale, err_scale);
+                             long long max_fail, const py::object& val,
+                             const py::object& step_weight, long long threads) {
+    Problem p = problem(S, E, Dr, starts, K, hidden, in_mean, in_scale, out_scale, err_scale,
+                        step_weight);
     Arr th0 = theta_of(theta0, p.sh);
     LmOptions o;
     o.epochs = int_arg(epochs, "epochs");
@@ -196,7 +208,7 @@ void register_kstep(py::module_& m) {
      py::arg("out_scale"), py::arg("err_scale"), py::kw_only(), py::arg("epochs") = 100,
      py::arg("mu") = 1e-3, py::arg("mu_dec") = 0.1, py::arg("mu_inc") = 10.0,
      py::arg("mu_max") = 1e10, py::arg("min_grad") = 1e-7, py::arg("max_fail") = 6,
-     py::arg("val") = py::none(), py::arg("threads") = 2,
+     py::arg("val") = py::none(), py::arg("step_weight") = py::none(), py::arg("threads") = 2,
      "Levenberg-Marquardt (trainlm's semantics, levenberg_marquardt.hpp) on the K-step "
      "error of the windows; val = (S, E, D, starts) validation windows (best-validation "
      "weights returned, max_fail). Returns (theta, history). Bit-identical for any thread "

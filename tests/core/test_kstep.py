@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from cdam_core import _core
-from cdam_core.reference.kstep import kstep_jacobian, kstep_lm, kstep_num_params
+from cdam_core.reference.kstep import (kstep_jacobian, kstep_lm, kstep_num_params,
+                                       kstep_residuals)
 
 
 def _problem(seed=0, N=400, ns=3, ne=4, H=5, K=6, windows=None):
@@ -23,8 +24,11 @@ def _problem(seed=0, N=400, ns=3, ne=4, H=5, K=6, windows=None):
     return theta, (S, E, Dr, starts, K, H) + scales
 
 
-def test_jacobian_equals_central_differences_and_the_numpy_twin():
+@pytest.mark.parametrize("weighted", [False, True])
+def test_jacobian_equals_central_differences_and_the_numpy_twin(weighted):
     theta, args = _problem()
+    if weighted:
+        args = args + (np.linspace(0.5, 2.0, args[4]),)
     e, J = _core.kstep_jacobian(theta, *args)
     e2, J2 = kstep_jacobian(theta, *args)
     assert J.shape == (5 * 6 * 3, theta.size)
@@ -36,8 +40,8 @@ def test_jacobian_equals_central_differences_and_the_numpy_twin():
     for p in range(theta.size):
         d = np.zeros(theta.size)
         d[p] = h
-        Jfd[:, p] = -(kstep_jacobian(theta + d, *args, jacobian=False)[0]
-                      - kstep_jacobian(theta - d, *args, jacobian=False)[0]) / (2 * h)
+        Jfd[:, p] = -(kstep_residuals(theta + d, *args) - kstep_residuals(theta - d, *args)) \
+            / (2 * h)
     np.testing.assert_allclose(J, Jfd, rtol=0, atol=1e-7 * np.abs(Jfd).max())
     # the recurrence matters: a later step depends on the network through the state
     assert np.abs(J[-3:]).max() > 2 * np.abs(J[:3]).max()
@@ -45,6 +49,7 @@ def test_jacobian_equals_central_differences_and_the_numpy_twin():
 
 def test_normal_equations_equal_the_twin_and_every_thread_count():
     theta, args = _problem(seed=1, N=3000, windows=300, K=8, H=7)
+    args = args + (1.0 / np.arange(1, 9),)      # step weights
     e, J = kstep_jacobian(theta, *args)
     out = [_core.kstep_normal(theta, *args, threads=t) for t in (1, 2, 3)]
     jtj, jte, sse = out[0]
@@ -98,6 +103,8 @@ def test_validation_windows_return_the_best_weights():
     (lambda a: a[:2] + (a[2][:-1],) + a[3:], "E: expected 400 rows"),
     (lambda a: a[:1] + (np.full_like(a[1], np.nan),) + a[2:], "S: contains NaN"),
     (lambda a: a[:4] + (np.array([0.5]),) + a[5:], "starts: expected integers"),
+    (lambda a: a + (np.ones(5),), "step_weight: expected length 6"),
+    (lambda a: a + (np.array([1, 1, 1, 0, 1, 1.0]),), "step_weight: every weight"),
 ])
 def test_bad_input_is_named(change, message):
     theta, args = _problem()

@@ -45,11 +45,14 @@ def register(subparsers) -> None:
                         "models/flight/physics.py); quad_hybrid: quad_physics with a "
                         "recurrent network on its rate residual trained by LM on the k-step "
                         "error (models/flight/hybrid.py; --hidden, --horizon, --lags, --epochs, "
-                        "--rates as its prior)")
+                        "--weighting, --rates as its prior)")
     p.add_argument("--horizon", type=int, default=None,
                    help="quad_hybrid: steps of each training window (default: the model's)")
     p.add_argument("--lags", type=int, default=None,
                    help="quad_hybrid: rotor-speed lags the network sees (default: the model's)")
+    p.add_argument("--weighting", default=None, choices=["flat", "naive"],
+                   help="quad_hybrid: the steps' errors alike, or each over the naive "
+                        "predictor's error at that step (default: the model's)")
     p.add_argument("--rates", default="dynamic", choices=["dynamic", "hold"],
                    help="quad_physics: integrate the rotational dynamics, or hold the body "
                         "rates (the nano-drone benchmark paper's physics model); quad_hybrid: "
@@ -92,7 +95,7 @@ def run(args) -> int:
     train = stack_records(args.train, inputs=args.inputs, outputs=args.outputs, **read)
     if args.model in ("quad_physics", "quad_hybrid"):
         return _physics(args, train, read)
-    for name in ("horizon", "lags"):
+    for name in ("horizon", "lags", "weighting"):
         if getattr(args, name) is not None:
             raise CliError(f"--{name}: needs --model quad_hybrid")
     args.hidden = 20 if args.hidden is None else args.hidden
@@ -192,8 +195,8 @@ def _physics(args, train, read) -> int:
         if kind == "quad_physics":
             model = QuadPhysics(dt=dts[0], rates=args.rates)
         else:
-            kw = {k: getattr(args, k) for k in ("hidden", "horizon", "lags", "epochs")
-                  if getattr(args, k) is not None}
+            kw = {k: getattr(args, k) for k in ("hidden", "horizon", "lags", "epochs",
+                                                 "weighting") if getattr(args, k) is not None}
             model = QuadHybrid(dt=dts[0], prior=args.rates, **kw)
     except ValueError as exc:
         raise CliError(f"--{str(exc).split(':')[0]}: {str(exc).split(': ', 1)[-1]}") from None

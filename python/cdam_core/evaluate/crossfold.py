@@ -178,12 +178,14 @@ def physics_effects_fold(files, test_type: str, variants=None, horizons=(1, 10, 
 
 #: the structures of the physics + network model (``models.flight.hybrid.QuadHybrid``) the
 #: hybrid fold chooses among on validation flights: the network's prior on the rates (the
-#: physics' increment or none) and the training horizon; 8 tanh units, 6 rotor-speed lags
-HYBRID_GRID = {"hold_K50": {"prior": "hold", "horizon": 50},
-               "hold_K10": {"prior": "hold", "horizon": 10},
-               "dynamic_K50": {"prior": "dynamic", "horizon": 50},
-               "dynamic_K10": {"prior": "dynamic", "horizon": 10}}
-HYBRID_FIXED = {"hidden": 8, "lags": 6, "epochs": 15}
+#: physics' increment or none) and the weights of the steps' errors (alike, or over the naive
+#: error at each step); windows of 50 steps, 8 tanh units, 6 rotor-speed lags (a first grid
+#: with windows of 10 steps as well chose 50 on the validation flights of both folds it ran)
+HYBRID_GRID = {"hold_flat": {"prior": "hold", "weighting": "flat"},
+               "hold_naive": {"prior": "hold", "weighting": "naive"},
+               "dynamic_flat": {"prior": "dynamic", "weighting": "flat"},
+               "dynamic_naive": {"prior": "dynamic", "weighting": "naive"}}
+HYBRID_FIXED = {"hidden": 8, "lags": 6, "epochs": 15, "horizon": 50}
 
 
 def hybrid_fold(files, test_type: str, grid=None, fixed=None, horizon: int = 50,

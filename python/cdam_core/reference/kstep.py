@@ -33,8 +33,9 @@ def _unpack(theta, ns, ni, H):
 
 
 def kstep_jacobian(theta, S, E, D, starts, K, hidden, in_mean, in_scale, out_scale, err_scale,
-                   jacobian: bool = True):
-    """(e, J) in the core's row order: row (w K + j) ns + i; J None without ``jacobian``."""
+                   step_weight=None, jacobian: bool = True):
+    """(e, J) in the core's row order: row (w K + j) ns + i; the errors of step j + 1 times
+    ``step_weight[j]`` (None: 1); J None without ``jacobian``."""
     theta = np.asarray(theta, float)
     S, E, D = (np.asarray(a, float) for a in (S, E, D))
     starts = np.asarray(starts, int)
@@ -43,6 +44,7 @@ def kstep_jacobian(theta, S, E, D, starts, K, hidden, in_mean, in_scale, out_sca
     P = kstep_num_params(ns, ne, H)
     W1, b1, W2, b2 = _unpack(theta, ns, ni, H)
     m, c, r, q = (np.asarray(v, float) for v in (in_mean, in_scale, out_scale, err_scale))
+    omega = np.ones(K) if step_weight is None else np.asarray(step_weight, float)
     Wn = starts.size
     s = S[starts].copy()                                   # (W, ns)
     G = np.zeros((Wn, ns, P))
@@ -68,17 +70,17 @@ def kstep_jacobian(theta, S, E, D, starts, K, hidden, in_mean, in_scale, out_sca
                 B[:, i, o_b2 + i] = r[i]
             G = G + np.einsum("wik,wkp->wip", A, G) + B
         s = s + D[t] + out
-        e[:, j] = (S[t + 1] - s) / q
+        e[:, j] = (S[t + 1] - s) / q * omega[j]
         if jacobian:
-            J[:, j] = G / q[None, :, None]
+            J[:, j] = G / q[None, :, None] * omega[j]
     e = e.reshape(-1)
     return (e, J.reshape(-1, P)) if jacobian else (e, None)
 
 
 def kstep_residuals(theta, S, E, D, starts, K, hidden, in_mean, in_scale, out_scale,
-                    err_scale):
+                    err_scale, step_weight=None):
     return kstep_jacobian(theta, S, E, D, starts, K, hidden, in_mean, in_scale, out_scale,
-                          err_scale, jacobian=False)[0]
+                          err_scale, step_weight, jacobian=False)[0]
 
 
 def kstep_lm(theta0, args, epochs, mu=1e-3, mu_dec=0.1, mu_inc=10.0, mu_max=1e10,

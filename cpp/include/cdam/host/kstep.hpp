@@ -10,8 +10,9 @@
 // reference/__init__.py), D = H ni + H + ns H + ns.
 //
 // The error: windows of K steps from the measured state s_a at each start a (the caller keeps
-// windows inside one record); residual row (w, j, i) = (S[a + j, i] - s_hat_j,i) / q_i,
-// j = 1..K (q: the error scale per state); mse = sum e^2 / (W K ns).
+// windows inside one record); residual row (w, j, i) = omega_j (S[a + j, i] - s_hat_j,i) / q_i,
+// j = 1..K (q: the error scale per state, omega: an optional weight per step, 1 without);
+// mse = sum e^2 / (W K ns).
 //
 // Jacobian by forward sensitivities, G_j = d s_hat_j / d theta (D x ns), G_0 = 0:
 //   G_{j+1} = G_j + G_j A_j^T + B_j,  A_j = d o / d s = diag(r) W2 diag(1 - a^2) W1[:, :ns]
@@ -63,6 +64,7 @@ struct KStepShape {
   const double* in_scale = nullptr;
   const double* out_scale = nullptr;
   const double* err_scale = nullptr;
+  const double* step_weight = nullptr;   // K weights of the steps' errors (null: all 1)
   Index ni() const { return ns + ne; }
   Index dim() const { return H * ni() + H + ns * H + ns; }
 };
@@ -197,8 +199,9 @@ class KStep {
         for (Index h = 0; h < H; ++h) o += W2[h * ns + i] * av[h];
         st[i] += d.Dr[t * ns + i] + sh_.out_scale[i] * o;
       }
+      const double wj = sh_.step_weight ? sh_.step_weight[j] : 1.0;
       for (Index i = 0; i < ns; ++i) {
-        const double q = sh_.err_scale[i];
+        const double q = sh_.err_scale[i] / wj;
         e[j * ns + i] = (d.S[(t + 1) * ns + i] - st[i]) / q;
         if (sens) {
           const double* gi = s.G.data() + i * D;

@@ -23,7 +23,8 @@ Position, velocity and attitude follow the physics: the translational equations 
 ``QuadPhysics`` (kT/m, drag) and the quaternion kinematics, one RK4 step per sample with the
 rates moving linearly from w(t) to w(t+1) over the step (exact for that path).
 
-Training: windows of ``horizon`` steps from the measured rates, one every ``stride`` samples
+Training: windows of ``horizon`` steps from the measured rates (each step's error weighted alike,
+or by one over the naive predictor's error at that step: ``weighting``), one every ``stride`` samples
 (default: the horizon, so every sample is in one window), inside each record; the network starts
 from small weights (uniform +-0.1 from ``seed``, so the model starts as the physics) and runs
 ``epochs`` LM epochs at most (trainlm's rules). The structure (hidden units, horizon, lags,
@@ -43,9 +44,10 @@ from cdam_core.models.flight.physics import (STATES, QuadPhysics, rk4_step,
 from cdam_core.models.protocol import Model
 from cdam_core.models.schema import field_array
 
-__all__ = ["QuadHybrid", "PRIORS"]
+__all__ = ["QuadHybrid", "PRIORS", "WEIGHTINGS"]
 
 PRIORS = ("dynamic", "hold")
+WEIGHTINGS = ("flat", "naive")
 RATES = slice(10, 13)
 
 
@@ -62,6 +64,9 @@ class QuadHybrid(Model):
         stride: samples between window starts (None: the horizon).
         seed: of the initial weights.
         threads: of the core's LM (the result does not depend on it).
+        weighting: "flat" (every step's error alike) or "naive" (each step's error divided by
+            the naive predictor's RMS error at that step on the training windows, so that every
+            horizon counts relative to holding the state, as the benchmark scores it).
     """
 
     kind = "quad_hybrid"
@@ -69,7 +74,7 @@ class QuadHybrid(Model):
 
     def __init__(self, dt: float = 0.01, hidden: int = 8, horizon: int = 50, lags: int = 2,
                  prior: str = "dynamic", epochs: int = 30, stride=None, seed: int = 0,
-                 threads: int = 2):
+                 threads: int = 2, weighting: str = "flat"):
         self.dt = dt
         self.hidden = hidden
         self.horizon = horizon
@@ -79,6 +84,7 @@ class QuadHybrid(Model):
         self.stride = stride
         self.seed = seed
         self.threads = threads
+        self.weighting = weighting
         self._check_params()
 
     def _check_params(self) -> None:
@@ -93,6 +99,8 @@ class QuadHybrid(Model):
             positive_int(self.stride, "stride")
         if self.prior not in PRIORS:
             raise ValueError(f"prior: unknown {self.prior!r}; use 'dynamic' or 'hold'")
+        if self.weighting not in WEIGHTINGS:
+            raise ValueError(f"weighting: unknown {self.weighting!r}; use 'flat' or 'naive'")
 
     # -- the parts ---------------------------------------------------------------------------
     @property
@@ -173,9 +181,16 @@ class QuadHybrid(Model):
         H = int(self.hidden)
         D = _core.kstep_num_params(3, E.shape[1], H)
         theta0 = np.asarray(_core.Rng(int(self.seed)).uniform_array(D, -0.1, 0.1), float)
+        weight = None
+        if self.weighting == "naive":
+            # each step's error over the naive predictor's RMS at that step (training windows)
+            naive = S[starts[:, None] + np.arange(1, K + 1)] - S[starts][:, None, :]
+            rms = np.sqrt(np.mean((naive / self.err_scale_) ** 2, axis=(0, 2)))
+            weight = 1.0 / np.maximum(rms, 1e-3 * rms.max())
+            weight /= np.sqrt(np.mean(weight ** 2))
         self.theta_, hist = _core.kstep_train_lm(
             theta0, S, E, Dr, starts.astype(np.int64), K, H, self.in_mean_, self.in_scale_,
-            self.out_scale_, self.err_scale_, epochs=int(self.epochs),
+            self.out_scale_, self.err_scale_, epochs=int(self.epochs), step_weight=weight,
             threads=int(self.threads))
         self.history_ = {"mse": [float(v) for v in hist["mse"]], "stop": hist["stop"]}
         self.n_inputs_, self.n_outputs_ = 4, len(STATES)
@@ -213,7 +228,8 @@ class QuadHybrid(Model):
         return {"dt": float(self.dt), "hidden": int(self.hidden), "horizon": int(self.horizon),
                 "lags": int(self.lags), "prior": self.prior, "epochs": int(self.epochs),
                 "stride": None if self.stride is None else int(self.stride),
-                "seed": int(self.seed), "physics": self.physics_.to_dict(),
+                "seed": int(self.seed), "weighting": self.weighting,
+                "physics": self.physics_.to_dict(),
                 "theta": vec(self.theta_), "in_mean": vec(self.in_mean_),
                 "in_scale": vec(self.in_scale_), "out_scale": vec(self.out_scale_),
                 "err_scale": vec(self.err_scale_), "feature_scale": vec(self.feature_scale_)}
@@ -222,7 +238,8 @@ class QuadHybrid(Model):
     def from_dict(cls, d: dict) -> "QuadHybrid":
         try:
             m = cls(dt=d["dt"], hidden=d["hidden"], horizon=d["horizon"], lags=d["lags"],
-                    prior=d["prior"], epochs=d["epochs"], stride=d["stride"], seed=d["seed"])
+                    prior=d["prior"], epochs=d["epochs"], stride=d["stride"], seed=d["seed"],
+                    weighting=d["weighting"])
         except ValueError as exc:
             raise ValueError(f"model.{exc}") from None
         try:
