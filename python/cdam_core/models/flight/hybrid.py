@@ -72,9 +72,9 @@ class QuadHybrid(Model):
     kind = "quad_hybrid"
     fits_segments = True
 
-    def __init__(self, dt: float = 0.01, hidden: int = 8, horizon: int = 50, lags: int = 2,
-                 prior: str = "dynamic", epochs: int = 30, stride=None, seed: int = 0,
-                 threads: int = 2, weighting: str = "flat"):
+    def __init__(self, dt: float = 0.01, hidden: int = 8, horizon: int = 50, lags: int = 6,
+                 prior: str = "dynamic", epochs: int = 15, stride=None, seed: int = 0,
+                 threads: int = 2, weighting: str = "naive"):
         self.dt = dt
         self.hidden = hidden
         self.horizon = horizon
