@@ -9,7 +9,12 @@ count): the sensitivities carried forward vectorised over a chunk of windows (10
 J stays in cache-sized pieces), J'J by one BLAS SYRK per chunk (scipy dsyrk), J'e by GEMV,
 Cholesky by LAPACK; trainlm's loop. Bound: the J'J's FLOPs (rows x D x (D + 1): the lower
 triangle with the diagonal, a multiply-add counted as 2) at numpy's DGEMM rate measured in this
-run (1 core; 2 cores for the 2-thread figure)."""
+run (1 core; 2 cores for the 2-thread figure).
+
+Measured here (AMD EPYC, AVX2 kernels, 2 cores shared, load 9-12; the chosen structure: 8 units,
+6 lags, 203 weights): 0.38 s per epoch on 1 thread (CPU time) against 0.72 s for the numpy
+reference (1.9x), 2.6x the bound of 0.145 s (7.2 GFLOP at 49.6 GFLOP/s); 2 threads 1.64 s wall
+at load 10-12 (each thread got a fraction of a core); the same bits at 1 and 2 threads."""
 from __future__ import annotations
 
 import glob
