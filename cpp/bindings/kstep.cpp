@@ -91,6 +91,9 @@ Arr theta_of(const py::array& theta, const host::KStepShape& sh) {
 
 void register_kstep(py::module_& m) {
   m.def("kstep_num_params", [](long long ns, long long ne, long long hidden) {
+    int_arg(ns, "states", 1, 100000);
+    int_arg(ne, "exogenous", 0, 100000);
+    int_arg(hidden, "hidden", 1, 100000);
     return host::KStepShape{static_cast<Index>(ns), static_cast<Index>(ne),
                             static_cast<Index>(hidden), 1}.dim();
   }, py::arg("states"), py::arg("exogenous"), py::arg("hidden"));

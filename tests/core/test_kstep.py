@@ -110,3 +110,11 @@ def test_bad_input_is_named(change, message):
     theta, args = _problem()
     with pytest.raises(ValueError, match=message):
         _core.kstep_jacobian(*change((theta,) + args))
+
+
+def test_parameter_count():
+    assert _core.kstep_num_params(3, 18, 8) == kstep_num_params(3, 18, 8) == 8 * 21 + 8 + 27
+    with pytest.raises(ValueError, match="hidden: must be in 1"):
+        _core.kstep_num_params(3, 4, 0)
+    with pytest.raises(ValueError, match="states: must be in 1"):
+        _core.kstep_num_params(-1, 4, 2)
