@@ -22,8 +22,11 @@ def test_identify_then_evaluate_on_another_trajectory_type(tmp_path, capsys):
     train = [str(FLIGHTS / f"{n}.parquet") for n in TRAIN]
     assert main(["identify", *train, "--loader", "nanodrone", "--model", "quad_hybrid",
                  "--hidden", "4", "--horizon", "10", "--lags", "2", "--epochs", "3",
-                 "--save", str(model), "--quiet"]) == 0
-    assert "network_weights" in capsys.readouterr().out
+                 "--save", str(model), "--json", str(tmp_path / "id.json"), "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "network_weights" in out and "k-step LM: 3 epochs" in out
+    hist = json.loads((tmp_path / "id.json").read_text())["training"]["mse"]
+    assert len(hist) == 4 and hist[-1] < hist[0]
     assert main(["evaluate", str(model), str(FLIGHTS / "square_20251017_run2.parquet"),
                  "--loader", "nanodrone", "--horizon", "10", "--no-free-run", "--json",
                  str(tmp_path / "ev.json"), "--quiet"]) == 0

@@ -213,6 +213,13 @@ def _physics(args, train, read) -> int:
     result = {"kind": kind, "rates": args.rates, "dt": dts[0],
               "train_file": [str(x) for x in args.train],
               "parameters": {k: {"value": v, "std": s} for k, (v, s) in params.items()}}
+    if kind == "quad_hybrid":
+        result["structure"] = {k: getattr(model, k) for k in
+                               ("hidden", "horizon", "lags", "prior", "weighting", "epochs")}
+        result["training"] = model.history_
+        print(f"  k-step LM: {len(model.history_['mse']) - 1} epochs, weighted k-step mse "
+              f"{model.history_['mse'][0]:.4g} -> {model.history_['mse'][-1]:.4g} "
+              f"({model.history_['stop']})")
     if args.test:
         te = stack_records([args.test], inputs=train.inputs, outputs=train.outputs, **read)
         hs = [h for h in (1, 10, 50) if h + model.t0 < max(te.lengths)]
