@@ -12,6 +12,7 @@ void register_rng(py::module_& m);
 void register_sim(py::module_& m);
 void register_optim(py::module_& m);
 void register_greybox(py::module_& m);
+void register_kstep(py::module_& m);
 
 PYBIND11_MODULE(_core, m) {
   m.doc() = "cdam_core._core: the C++/Eigen core (private; use the cdam_core package)";
@@ -25,6 +26,7 @@ PYBIND11_MODULE(_core, m) {
   register_sim(m);
   register_optim(m);
   register_greybox(m);
+  register_kstep(m);
   m.def("cancel_native_loops", [](bool cancel) {
           cdam::bind::cancel_requested().store(cancel);
         }, py::arg("cancel") = true,

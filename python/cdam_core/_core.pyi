@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['Rng', 'SIM_CONTROL_SIZE', 'SIM_NLOG', 'SIM_NSP', 'SIM_NU', 'SIM_NX', 'SIM_PLANT_SIZE', 'bp_fitness', 'cancel_native_loops', 'five_point_cubic_smooth', 'minmax_apply', 'minmax_fit', 'mlp_forward', 'mlp_jacobian', 'mlp_jtj', 'mlp_mse_gradient', 'mlp_num_params', 'narx_regressors', 'narx_simulate', 'optimise', 'sim_closed_loop', 'sim_fastest_rate', 'sim_open_loop', 'sim_rhs', 'sim_substeps', 'train_gd', 'train_lm']
+__all__: list[str] = ['Rng', 'SIM_CONTROL_SIZE', 'SIM_NLOG', 'SIM_NSP', 'SIM_NU', 'SIM_NX', 'SIM_PLANT_SIZE', 'bp_fitness', 'cancel_native_loops', 'five_point_cubic_smooth', 'kstep_jacobian', 'kstep_normal', 'kstep_num_params', 'kstep_train_lm', 'minmax_apply', 'minmax_fit', 'mlp_forward', 'mlp_jacobian', 'mlp_jtj', 'mlp_mse_gradient', 'mlp_num_params', 'narx_regressors', 'narx_simulate', 'optimise', 'sim_closed_loop', 'sim_fastest_rate', 'sim_open_loop', 'sim_rhs', 'sim_substeps', 'train_gd', 'train_lm']
 class Rng:
     """
     xoshiro128** with splitmix32 seeding; the numpy twin draws the same stream.
@@ -33,6 +33,20 @@ def cancel_native_loops(cancel: bool = True) -> None:
 def five_point_cubic_smooth(y: numpy.ndarray, passes: typing.SupportsInt | typing.SupportsIndex = 1) -> numpy.ndarray:
     """
     Five-point cubic smoothing, `passes` times, per column of a (N,) or (N, C) array.
+    """
+def kstep_jacobian(theta: numpy.ndarray, S: numpy.ndarray, E: numpy.ndarray, D: numpy.ndarray, starts: numpy.ndarray, K: typing.SupportsInt | typing.SupportsIndex, hidden: typing.SupportsInt | typing.SupportsIndex, in_mean: numpy.ndarray, in_scale: numpy.ndarray, out_scale: numpy.ndarray, err_scale: numpy.ndarray, step_weight: typing.Any = None) -> tuple[numpy.typing.NDArray[numpy.float64], numpy.typing.NDArray[numpy.float64]]:
+    """
+    (e, J) of the K-step windows: e (W K ns) the scaled errors, row (w K + j) ns + i for step j + 1 of window w, times step_weight[j] (K weights; None: 1); J (W K ns, D) = d y_hat / d theta step_weight / err_scale by forward sensitivities (cdam/host/kstep.hpp).
+    """
+def kstep_normal(theta: numpy.ndarray, S: numpy.ndarray, E: numpy.ndarray, D: numpy.ndarray, starts: numpy.ndarray, K: typing.SupportsInt | typing.SupportsIndex, hidden: typing.SupportsInt | typing.SupportsIndex, in_mean: numpy.ndarray, in_scale: numpy.ndarray, out_scale: numpy.ndarray, err_scale: numpy.ndarray, step_weight: typing.Any = None, threads: typing.SupportsInt | typing.SupportsIndex = 1) -> tuple[numpy.typing.NDArray[numpy.float64], numpy.typing.NDArray[numpy.float64], float]:
+    """
+    (J'J, J'e, sse) over the K-step windows, without forming J; bit-identical for any thread count.
+    """
+def kstep_num_params(states: typing.SupportsInt | typing.SupportsIndex, exogenous: typing.SupportsInt | typing.SupportsIndex, hidden: typing.SupportsInt | typing.SupportsIndex) -> int:
+    ...
+def kstep_train_lm(theta0: numpy.ndarray, S: numpy.ndarray, E: numpy.ndarray, D: numpy.ndarray, starts: numpy.ndarray, K: typing.SupportsInt | typing.SupportsIndex, hidden: typing.SupportsInt | typing.SupportsIndex, in_mean: numpy.ndarray, in_scale: numpy.ndarray, out_scale: numpy.ndarray, err_scale: numpy.ndarray, *, epochs: typing.SupportsInt | typing.SupportsIndex = 100, mu: typing.SupportsFloat | typing.SupportsIndex = 0.001, mu_dec: typing.SupportsFloat | typing.SupportsIndex = 0.1, mu_inc: typing.SupportsFloat | typing.SupportsIndex = 10.0, mu_max: typing.SupportsFloat | typing.SupportsIndex = 10000000000.0, min_grad: typing.SupportsFloat | typing.SupportsIndex = 1e-07, max_fail: typing.SupportsInt | typing.SupportsIndex = 6, val: typing.Any = None, step_weight: typing.Any = None, threads: typing.SupportsInt | typing.SupportsIndex = 2) -> tuple[numpy.typing.NDArray[numpy.float64], dict]:
+    """
+    Levenberg-Marquardt (trainlm's semantics, levenberg_marquardt.hpp) on the K-step error of the windows; val = (S, E, D, starts) validation windows (best-validation weights returned, max_fail). Returns (theta, history). Bit-identical for any thread count.
     """
 def minmax_apply(X: numpy.ndarray, data_min: numpy.ndarray, data_max: numpy.ndarray, inverse: bool = False) -> numpy.ndarray:
     """

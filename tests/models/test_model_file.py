@@ -7,8 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from cdam_core.models import (ArxModel, BPNetwork, HybridNarx, QuadPhysics, load_model,
-                              read_model_file, save_model)
+from cdam_core.models import (ArxModel, BPNetwork, HybridNarx, QuadHybrid, QuadPhysics,
+                              load_model, read_model_file, save_model)
 from cdam_core.models.file import KINDS as FILE_KINDS
 from cdam_core.models.greybox.augmented import GreyBox
 from cdam_core.models.greybox.effects import CoulombFriction
@@ -59,6 +59,8 @@ KINDS = {
     "greybox": lambda: (GreyBox("rigid_axis", dt=1e-3, cutoff_hz=40.0,
                                 effects=(CoulombFriction("tau"),)), _axis()),
     "quad_physics": lambda: (QuadPhysics(), _quad()),
+    "quad_hybrid": lambda: (QuadHybrid(hidden=3, horizon=5, lags=2, epochs=3, stride=10),
+                            _quad()),
 }
 
 

@@ -34,17 +34,30 @@ def register(subparsers) -> None:
                         "or more)")
     p.add_argument("--seeds", type=int, default=1,
                    help="seeds per algorithm (seeds 0..N-1)")
-    p.add_argument("--hidden", type=int, default=20)
+    p.add_argument("--hidden", type=int, default=None,
+                   help="hidden units (default: 20; quad_hybrid: the model's default)")
     p.add_argument("--narx", default=None, help="NARX orders na,nb,nk (default: static map)")
-    p.add_argument("--model", default="bp", choices=["bp", "hybrid", "quad_physics"],
+    p.add_argument("--model", default="bp",
+                   choices=["bp", "hybrid", "quad_physics", "quad_hybrid"],
                    help="bp: the paper's network (static or NARX); hybrid: linear ARX with the "
                         "algorithm's network on its residual (needs --narx); quad_physics: "
                         "the quadrotor rigid body on its 4 rotor speeds (rad/s) and 13 states, "
                         "least squares on the training records (no smoothing, no algorithm; "
-                        "models/flight/physics.py)")
+                        "models/flight/physics.py); quad_hybrid: quad_physics with a "
+                        "recurrent network on its rate residual trained by LM on the k-step "
+                        "error (models/flight/hybrid.py; --hidden, --horizon, --lags, --epochs, "
+                        "--weighting, --rates as its prior)")
+    p.add_argument("--horizon", type=int, default=None,
+                   help="quad_hybrid: steps of each training window (default: the model's)")
+    p.add_argument("--lags", type=int, default=None,
+                   help="quad_hybrid: rotor-speed lags the network sees (default: the model's)")
+    p.add_argument("--weighting", default=None, choices=["flat", "naive"],
+                   help="quad_hybrid: the steps' errors alike, or each over the naive "
+                        "predictor's error at that step (default: the model's)")
     p.add_argument("--rates", default="dynamic", choices=["dynamic", "hold"],
                    help="quad_physics: integrate the rotational dynamics, or hold the body "
-                        "rates (the nano-drone benchmark paper's physics model)")
+                        "rates (the nano-drone benchmark paper's physics model); quad_hybrid: "
+                        "the prior of the network's rate residual")
     p.add_argument("--features", default="raw", choices=["raw", "physics"],
                    help="hybrid inputs: raw, or physics (4 motor commands in X-mixer order: "
                         "commands, thrust ~ sum of squares, roll/pitch/yaw torque combinations)")
@@ -53,7 +66,8 @@ def register(subparsers) -> None:
     p.add_argument("--smoothing", type=int, default=5, help="five-point smoothing passes")
     p.add_argument("--iterations", type=int, default=50, help="Tmax of the optimisers")
     p.add_argument("--population", type=int, default=20, help="g (butterflies) and CABC Np")
-    p.add_argument("--epochs", type=int, default=50, help="LM epochs at most")
+    p.add_argument("--epochs", type=int, default=None,
+                   help="LM epochs at most (default: 50; quad_hybrid: the model's)")
     p.add_argument("--goal", type=float, default=0.003, help="LM goal (training MSE)")
     p.add_argument("--report", default=None, help="folder for report.md and PNG figures")
     p.add_argument("--json", default=None, help="write the results as JSON")
@@ -80,8 +94,13 @@ def run(args) -> int:
     mapping = parse_column_map(args.map, "--map")
     read = dict(mapping=mapping, nan=args.nan, loader=args.loader)
     train = stack_records(args.train, inputs=args.inputs, outputs=args.outputs, **read)
-    if args.model == "quad_physics":
+    if args.model in ("quad_physics", "quad_hybrid"):
         return _physics(args, train, read)
+    for name in ("horizon", "lags", "weighting"):
+        if getattr(args, name) is not None:
+            raise CliError(f"--{name}: needs --model quad_hybrid")
+    args.hidden = 20 if args.hidden is None else args.hidden
+    args.epochs = 50 if args.epochs is None else args.epochs
     if len(train.lengths) > 1 and not args.test:
         raise CliError(f"--split: needs one contiguous TRAIN record, got {len(train.lengths)} "
                        f"segments (several records, or gaps declared in a sidecar); give "
@@ -152,39 +171,56 @@ def run(args) -> int:
 
 
 def _physics(args, train, read) -> int:
-    """``--model quad_physics``: fit on every training record (segments kept apart), print the
-    parameters with their standard deviations, score a --test record at h = 1, 10, 50 beside
-    the naive predictor, save."""
+    """``--model quad_physics`` / ``quad_hybrid``: fit on every training record (segments kept
+    apart), print the parameters with their standard deviations, score a --test record at
+    h = 1, 10, 50 beside the naive predictor, save."""
     import numpy as np
 
     from cdam_core.evaluate.groups import NANODRONE_GROUPS
     from cdam_core.evaluate.horizons import score_horizons
+    from cdam_core.models.flight.hybrid import QuadHybrid
     from cdam_core.models.flight.physics import STATES, QuadPhysics
     from cdam_core.record.stack import stack_records
 
+    kind = args.model
     if len(train.inputs) != 4 or list(train.outputs) != list(STATES):
-        raise CliError(f"--model quad_physics: needs the 4 rotor speeds as inputs and the 13 "
+        raise CliError(f"--model {kind}: needs the 4 rotor speeds as inputs and the 13 "
                        f"states {' '.join(STATES)} as outputs, in this order (got inputs "
                        f"{', '.join(train.inputs)}; outputs {', '.join(train.outputs)})")
     if args.split is not None:
-        raise CliError("--model quad_physics: give --test records instead of --split")
+        raise CliError(f"--model {kind}: give --test records instead of --split")
     dts = [float(np.median(np.diff(ds.t))) for ds in train.datasets if len(ds.t) > 1]
     if not dts or max(dts) / min(dts) - 1 > 0.01:
         raise CliError("TRAIN: the records are not sampled at one rate")
-    model = QuadPhysics(dt=dts[0], rates=args.rates)
+    try:
+        if kind == "quad_physics":
+            model = QuadPhysics(dt=dts[0], rates=args.rates)
+        else:
+            kw = {k: getattr(args, k) for k in ("hidden", "horizon", "lags", "epochs",
+                                                 "weighting") if getattr(args, k) is not None}
+            model = QuadHybrid(dt=dts[0], prior=args.rates, **kw)
+    except ValueError as exc:
+        raise CliError(f"--{str(exc).split(':')[0]}: {str(exc).split(': ', 1)[-1]}") from None
     try:
         model.fit(train.U, train.Y, segments=train.lengths)
     except ValueError as exc:
         raise CliError(f"TRAIN: {exc}") from None
     params = model.parameters()
-    print(f"quad_physics ({args.rates} rates) on {len(train.names)} record(s), "
+    print(f"{kind} ({args.rates} rates) on {len(train.names)} record(s), "
           f"{len(train.lengths)} segment(s), {len(train.Y)} samples, dt {dts[0]:g} s")
     for name, (v, s) in params.items():
         rel = f" ({100 * abs(s / v):.2g} %)" if s is not None and v else ""
         print(f"  {name:18s} {v:.6g}" + (f" +- {s:.3g}{rel}" if s is not None else ""))
-    result = {"kind": "quad_physics", "rates": args.rates, "dt": dts[0],
+    result = {"kind": kind, "rates": args.rates, "dt": dts[0],
               "train_file": [str(x) for x in args.train],
               "parameters": {k: {"value": v, "std": s} for k, (v, s) in params.items()}}
+    if kind == "quad_hybrid":
+        result["structure"] = {k: getattr(model, k) for k in
+                               ("hidden", "horizon", "lags", "prior", "weighting", "epochs")}
+        result["training"] = model.history_
+        print(f"  k-step LM: {len(model.history_['mse']) - 1} epochs, weighted k-step mse "
+              f"{model.history_['mse'][0]:.4g} -> {model.history_['mse'][-1]:.4g} "
+              f"({model.history_['stop']})")
     if args.test:
         te = stack_records([args.test], inputs=train.inputs, outputs=train.outputs, **read)
         hs = [h for h in (1, 10, 50) if h + model.t0 < max(te.lengths)]

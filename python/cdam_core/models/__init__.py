@@ -5,6 +5,7 @@ Kinds: ``bp_network`` (:class:`BPNetwork`, static or NARX), ``arx`` (:class:`Arx
 grey-box model plus the effects the residual loop found, :mod:`.greybox`).
 """
 from cdam_core.models.arx import ArxModel, physics_features
+from cdam_core.models.flight.hybrid import QuadHybrid
 from cdam_core.models.flight.physics import QuadPhysics
 from cdam_core.models.file import KINDS, ModelFile, load_model, read_model_file, save_model
 from cdam_core.models.hybrid import HybridNarx
@@ -12,5 +13,5 @@ from cdam_core.models.network import BPNetwork, hidden_node_candidates
 from cdam_core.models.protocol import Model, segment_bounds
 
 __all__ = ["ArxModel", "BPNetwork", "HybridNarx", "KINDS", "Model", "ModelFile",
-           "QuadPhysics", "hidden_node_candidates", "load_model", "physics_features",
+           "QuadHybrid", "QuadPhysics", "hidden_node_candidates", "load_model", "physics_features",
            "read_model_file", "save_model", "segment_bounds"]
