@@ -364,4 +364,6 @@ def test_emps_example_as_written_in_a_plain_clone(clone):
         assert any(abs(f - 50) < 0.7 for f in lines) and any(abs(f - 20.4) < 0.1 for f in lines)
     peaks = [u["frequency_hz"] for u in pulses["unexplained"] if u["kind"] == "spectral_peak"]
     assert any(abs(f - 24) < 1 for f in peaks), peaks
+    md = (out / "index.md").read_text()                  # "with their amplitudes": in N
+    assert re.search(r"^\| tau \| periodic_line \| 49\.\d\d \| amplitude \S+ N \(x", md, re.M)
     _nothing_tracked_changed(repo)
