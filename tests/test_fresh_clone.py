@@ -100,11 +100,41 @@ def test_commands_run_as_written_in_a_plain_clone(clone):
     assert ("thrust_loss", "Z") in effects
     for f in ("index.md", "index.html", "spectrum.png"):
         assert (repo / "out" / "rep" / f).is_file(), f
+    # a joint from the independent generator: the truth it prints, the cut-offs and the
+    # parameters with their sigmas that the residual loop reports, as the README gives them
+    gen = _inline(".venv/bin/python tests/residual/joint_generator.py")
+    res = _inline(".venv/bin/cdam residual out/joint.csv")
+    r = _bash(repo, env, gen)
+    assert r.returncode == 0, r.stderr[-2000:]
+    truth = json.loads(r.stdout)
+    said = re.search(r"prints the truth \(([^)]*)\)", text).group(1)
+    assert said == ", ".join(f"{k} {v:g}" for k, v in truth.items())
+    r = _bash(repo, env, res)
+    assert r.returncode == 0, r.stderr[-2000:]
+    js = json.loads(r.stdout)
+    assert (repo / "out" / "joint" / "index.html").is_file()
+    cut = js["settings"]["filter_choice"]["chosen_hz"]
+    motor, link = re.search(r"cut-offs per encoder \(motor (\S+) Hz, link (\S+) Hz\)",
+                            text).groups()
+    assert _as_written(cut["theta_m"], motor) and _as_written(cut["q"], link), cut
+    fin, sd = js["final_parameters"], js["final_std"]
+    fin["Fc"], sd["Fc"] = fin["coulomb_friction@tau_m.Fc"], sd["coulomb_friction@tau_m.Fc"]
+    stated = re.search(r"\(relative %\): (.*?): \d+ % low", text).group(1)
+    stated = re.findall(r"(\w+) ([\d.]+) \(([\d.]+) %\)", stated)
+    assert [k for k, _, _ in stated] == ["Im", "Dm", "Ks", "Kd", "I", "Dl", "G", "Fc"], stated
+    for k, v, pct in stated:
+        assert _as_written(fin[k], v) and _as_written(100 * sd[k] / fin[k], pct), (k, fin[k], sd[k])
     # the notebook, EMPS from the file in data/ to the report
     r = _bash(repo, env, _fenced("examples/emps_residual.ipynb"))
     assert r.returncode == 0, r.stderr[-3000:]
     assert (repo / "out" / "emps-notebook" / "index.html").is_file()
     _nothing_tracked_changed(repo)
+
+
+def _as_written(x: float, written: str) -> bool:
+    """``x`` rounds to the README's ``written`` figure (within half its last digit)."""
+    decimals = len(written.split(".")[1]) if "." in written else 0
+    return abs(x - float(written)) <= 0.5 * 10.0 ** -decimals * (1 + 1e-9)
 
 
 def _nothing_tracked_changed(repo):
