@@ -14,9 +14,10 @@ same pip install). In a source-tree run (PYTHONPATH set, the dev extension) PYTH
 at the clone's ``python/``, and the main job is skipped: its set-up would install into the
 venv running the tests. The slow tests (the main job, the EMPS example, the first-use snippet
 with the firmware commands on its model) run once in CI (scripts/test.sh runs ``-m "not
-fuzz"``). Left out: the batch examples over 10 seeds (minutes: tests/fleet runs the same code
-on small grids; here their specs are checked and the shared-data one must name what is
-missing) and the PX4 import, which needs a shared log.
+fuzz"``). Left out: the two batch runs over 10 seeds (minutes: tests/fleet runs every batch
+command on small grids; here their set-up lines run, their specs give the task counts the
+README states, and the shared-data one must name what is missing), the batch against a
+hand-started Dask scheduler, and the PX4 import, which needs a shared log.
 """
 import json
 import os
@@ -397,3 +398,25 @@ def test_emps_example_as_written_in_a_plain_clone(clone):
     md = (out / "index.md").read_text()                  # "with their amplitudes": in N
     assert re.search(r"^\| tau \| periodic_line \| 49\.\d\d \| amplitude \S+ N \(x", md, re.M)
     _nothing_tracked_changed(repo)
+
+
+def test_batch_examples_hold_the_tasks_the_readme_counts(clone):
+    """The batch examples themselves take minutes (tests/fleet runs every command on small
+    grids): here the README's set-up lines of the seeds example run as written, and both specs
+    read from the clone give the task counts the README states (90 and 60)."""
+    from cdam_core.fleet.spec import load_spec
+    repo, env = clone
+    text = " ".join(README.split())
+    block = _fenced("docs/examples/batch/seeds.json")
+    r = _bash(repo, env, "\n".join(ln for ln in block.splitlines()
+                                   if not ln.startswith(".venv/bin/cdam batch")))
+    assert r.returncode == 0, r.stderr[-2000:]
+    counts = {}
+    for name in ("paper_seeds", "seeds"):
+        spec = load_spec(repo / "docs" / "examples" / "batch" / f"{name}.json", base=repo)
+        counts[name] = len(spec.tasks())
+    assert f"as {counts['paper_seeds']} tasks on a LocalCluster" in text
+    assert f"score the second: {counts['seeds']} tasks)" in text
+    assert counts == {"paper_seeds": 90, "seeds": 60}
+    assert sorted(p.name for p in (repo / "out" / "sim").glob("*.csv")) == ["flight1.csv",
+                                                                             "flight2.csv"]
