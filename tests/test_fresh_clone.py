@@ -205,7 +205,6 @@ def test_first_use_snippet_runs_and_matches_its_explanation(clone):
     assert "#include" in (repo / "out" / "model.hpp").read_text()
     rep = json.loads((repo / "out" / "check.json").read_text())
     assert json.loads(r.stdout[r.stdout.index("{"):]) == rep
-    print(rep)
     assert rep["kind"] == "bp_network" and rep["heap_free"] is True
     _nothing_tracked_changed(repo)      # firmware_stubs/generated/model.hpp untouched
 
