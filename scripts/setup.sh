@@ -12,7 +12,7 @@
 #
 # apt and pip output goes to build/setup.log; the terminal gets one line a step. Missing apt
 # packages are installed with apt-get (as root, else through sudo); none missing, no root.
-# Idempotent: a second run only rebuilds.
+# Idempotent: a second run on the same commit (no uncommitted change) builds nothing.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -59,11 +59,28 @@ fi
 VPIP=".venv/bin/python -m pip"
 EXTRA=""
 [ $TESTS -eq 1 ] && EXTRA="[test]"
-echo "setup: building and installing cdam_core$EXTRA into .venv (a few minutes the first time)"
-{ $VPIP install --upgrade pip \
-  && $VPIP install "scikit-build-core>=0.10" "pybind11>=2.12" "cmeel-eigen>=3.4" cmake ninja \
-  && $VPIP install --no-build-isolation -Cbuild-dir=build/release ".$EXTRA"; } >> "$LOG" 2>&1 \
-  || fail "pip install"
+# What .venv was built from: the commit's tree when the checkout has no uncommitted change
+# (else nothing: a tarball or a modified tree is always rebuilt). The same tree already built
+# with these extras is not built again (main.sh run twice, then test.sh: seconds, not minutes).
+STAMP=.venv/cdam-setup.stamp
+SRC=""
+if [ "$(git rev-parse --show-toplevel 2>/dev/null)" = "$PWD" ] \
+   && [ -z "$(git status --porcelain -- . ':(exclude).venv' 2>/dev/null)" ]; then
+  SRC="$(git rev-parse 'HEAD^{tree}')"
+fi
+if [ -n "$SRC" ] && [ -f "$STAMP" ] \
+   && { grep -qxF "$SRC $EXTRA" "$STAMP" || { [ -z "$EXTRA" ] && grep -q "^$SRC " "$STAMP"; }; } \
+   && .venv/bin/python -c "import cdam_core._core" > /dev/null 2>&1; then
+  echo "setup: cdam_core$EXTRA already built from this commit's tree (remove $STAMP to rebuild)"
+else
+  echo "setup: building and installing cdam_core$EXTRA into .venv (a few minutes the first time)"
+  rm -f "$STAMP"
+  { $VPIP install --upgrade pip \
+    && $VPIP install "scikit-build-core>=0.10" "pybind11>=2.12" "cmeel-eigen>=3.4" cmake ninja \
+    && $VPIP install --no-build-isolation -Cbuild-dir=build/release ".$EXTRA"; } >> "$LOG" 2>&1 \
+    || fail "pip install"
+  if [ -n "$SRC" ]; then echo "$SRC $EXTRA" > "$STAMP"; fi
+fi
 .venv/bin/python -c "import cdam_core, cdam_core._core; print('setup: cdam_core', cdam_core.__version__, 'ready (log: build/setup.log)')"
 if [ $FIRMWARE -eq 1 ]; then
   .venv/bin/python -c "

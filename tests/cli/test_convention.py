@@ -40,7 +40,7 @@ def _commands():
 
 # the commands that compute results (the others convert or record files)
 COMPUTING = ["cdam paper", "cdam identify", "cdam residual", "cdam evaluate", "cdam demo",
-             "cdam merge", "cdam firmware check"]
+             "cdam merge", "cdam firmware check", "cdam monitor", "cdam batch"]
 
 
 def test_every_default_is_shown_in_help():

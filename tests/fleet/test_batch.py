@@ -176,6 +176,14 @@ def test_cli_bad_spec_is_one_line_exit_2(folder):
     assert r.returncode == 2
     assert r.stderr.count("\n") == 1 and r.stderr.startswith("cdam batch: error: ")
     assert "not valid JSON" in r.stderr
+    assert not (folder / "o").exists()                      # "nothing written"
+
+
+def test_shared_records_missing_name_the_folder_and_the_variable(folder, monkeypatch):
+    monkeypatch.setenv("CDAM_SHARED_DATA", str(folder / "no-shared"))
+    with pytest.raises(ValueError, match="spec.records") as e:
+        parse_spec({"command": "crossfold", "records": "shared:nanodrone/*.parquet"}, base=folder)
+    assert str(folder / "no-shared") in str(e.value) and "CDAM_SHARED_DATA" in str(e.value)
 
 
 def test_cli_local_cluster_runs_and_reports_the_failed_record(folder):

@@ -3,6 +3,7 @@ HTML is loaded by headless Chromium, which takes a screenshot (not blank) and re
 image that did not load (none may be missing); every figure has a caption under it, and the
 tables give units (the record's, from its sidecar) and standard deviations."""
 import json
+import re
 import sys
 from pathlib import Path
 
@@ -47,6 +48,9 @@ def test_residual_report_page_with_units_and_sigmas(tmp_path, bundled_record):
             for ln in md.splitlines() if ln.startswith("| ") and ln.count("|") == 6}
     assert rows["M"][3] == "kg" and rows["Fv"][3] == "N s/m" and rows["offset"][3] == "N"
     assert float(rows["M"][1]) > 0 and rows["coulomb_friction@tau.Fc"][3] == "N"
+    # the residual's periodic lines (50 Hz mains on DATA_EMPS): amplitudes in the force's unit
+    lines = [ln for ln in md.splitlines() if ln.startswith("| tau | periodic_line |")]
+    assert lines and all(re.search(r"\| amplitude [-0-9.e]+ N \(x", ln) for ln in lines), lines
 
 
 def _small_record(d: Path):
@@ -80,3 +84,30 @@ def test_summary_report_page(tmp_path):
                          source="here")
     res = _check(tmp_path / "sum" / "index.html", tmp_path)
     assert res["images"] == 0
+
+
+def test_monitor_report_page(tmp_path):
+    """`cdam monitor --report`: the page opens with its figure captioned; the table's alarm
+    count and first alarm per output are those of --json, the residual statistics carry the
+    output's unit (the sidecar's)."""
+    _small_record(tmp_path)
+    rec = tmp_path / "small.csv"
+    assert main(["identify", str(rec), "--algo", "bp", "--epochs", "5", "--hidden", "3",
+                 "--narx", "2,2,1", "--smoothing", "0", "--quiet",
+                 "--save", str(tmp_path / "m.json")]) == 0
+    assert main(["monitor", str(tmp_path / "m.json"), str(rec), "--paths", "100", "--quiet",
+                 "--calibrate", str(tmp_path / "mm.json")]) == 0
+    assert main(["monitor", str(tmp_path / "mm.json"), str(rec), "--calibrate",
+                 str(tmp_path / "x.json"), "--report", str(tmp_path / "no")]) == 2
+    assert main(["monitor", str(tmp_path / "mm.json"), str(rec), "--quiet", "--json",
+                 str(tmp_path / "a.json"), "--report", str(tmp_path / "mon")]) == 0
+    js = json.loads((tmp_path / "a.json").read_text())
+    res = _check(tmp_path / "mon" / "index.html", tmp_path)
+    assert res["images"] == 1
+    md = (tmp_path / "mon" / "index.md").read_text()
+    row = next(ln for ln in md.splitlines() if ln.startswith("| y |")).split("|")
+    sec = json.loads((tmp_path / "mm.json").read_text())["monitor"]
+    assert row[3].strip() == f"{sec['std'][0]:.4g} m"
+    alarms = [a["t"] for a in js["alarms"]]
+    assert int(row[6]) == len(alarms) == js["alarm_count"]["y"]
+    assert row[7].strip() == (f"{alarms[0]:.4f}" if alarms else "-")

@@ -161,15 +161,18 @@ def _main(argv=None) -> int:
     """Write one record as CSV (plain numpy) for the README's example; print the truth."""
     import argparse
     import json
-    ap = argparse.ArgumentParser(description="independent flexible-joint record (plain numpy)")
+    ap = argparse.ArgumentParser(description="independent flexible-joint record (plain numpy)",
+                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     ap.add_argument("out", help="CSV file to write (columns t, tau_m1, theta_m1, q1)")
     ap.add_argument("--fs", type=float, default=500.0, help="sampling rate, Hz")
-    ap.add_argument("--plane", choices=("horizontal", "vertical"), default="vertical")
-    ap.add_argument("--control", choices=("open", "motor", "link"), default="motor")
+    ap.add_argument("--plane", choices=("horizontal", "vertical"), default="vertical",
+                    help="plane of motion (vertical: gravity on the link)")
+    ap.add_argument("--control", choices=("open", "motor", "link"), default="motor",
+                    help="open-loop torque, or a PD loop on the measured motor or link angle")
     ap.add_argument("--link-counts", type=int, default=4096, help="link encoder counts/rev")
-    ap.add_argument("--motor-counts", type=int, default=16384)
+    ap.add_argument("--motor-counts", type=int, default=16384, help="motor encoder counts/rev")
     ap.add_argument("--Fc", type=float, default=0.0, help="motor dry friction, N m")
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=int, default=0, help="seed of the excitation and the noise")
     a = ap.parse_args(argv)
     j = Joint(fs=a.fs, plane=a.plane, control=a.control, link_counts=a.link_counts,
               motor_counts=a.motor_counts, link_noise=2e-4 if a.link_counts else 0.0,

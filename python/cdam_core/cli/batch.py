@@ -64,14 +64,14 @@ def register(subparsers) -> None:
 
 def run(args) -> int:
     from cdam_core.fleet.spec import load_spec
+    if args.workers is not None and args.workers < 1:
+        raise CliError(f"--workers: must be >= 1, got {args.workers}")
+    spec = load_spec(args.spec)        # a bad spec: exit 2 before any folder is created
     check_io(inputs=[("SPEC", args.spec)], files=[("--json", args.json)],
              folders=[("--out", args.out)])
     if args.report is not None:
         check_io(inputs=[("SPEC", args.spec)], files=[("--json", args.json)],
                  folders=[("--report", args.report)])
-    if args.workers is not None and args.workers < 1:
-        raise CliError(f"--workers: must be >= 1, got {args.workers}")
-    spec = load_spec(args.spec)
     tasks = spec.tasks()
     from cdam_core.fleet.graph import local_cluster, run_batch
     t0 = time.perf_counter()

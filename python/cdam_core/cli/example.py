@@ -12,45 +12,51 @@ from __future__ import annotations
 
 import argparse
 import sys
+from contextlib import nullcontext
 from pathlib import Path
 
 
 EMPS_UNITS = {"tau": "N", "q": "m"}     # the EMPS axis: force gtau * vir in N, position in m
 
 
-def emps_report(out_dir) -> Path:
-    """Write the EMPS example report into ``out_dir``; returns the path of index.md."""
+def emps_report(out_dir, ticker=None) -> Path:
+    """Write the EMPS example report into ``out_dir``; returns the path of index.md.
+    ``ticker(what)``: a context manager shown while a long step runs (none by default)."""
     from cdam_core.record.realdata.emps import load_emps
     from cdam_core.report.residual import write_report
     from cdam_core.residual.analyse import analyse
+    ticker = ticker or (lambda what: nullcontext())
     d, p = load_emps("DATA_EMPS"), load_emps("DATA_EMPS_PULSES")
-    sel = analyse("rigid_axis", d["t"], {"tau": d["force"], "q": d["qm"]},
-                  validation=(p["t"], {"tau": p["force"], "q": p["qm"]}), output_error=True)
+    with ticker("the residual loop on DATA_EMPS (structure, estimator, free runs)"):
+        sel = analyse("rigid_axis", d["t"], {"tau": d["force"], "q": d["qm"]},
+                      validation=(p["t"], {"tau": p["force"], "q": p["qm"]}), output_error=True)
     out = write_report(sel, out_dir, title="EMPS (DATA_EMPS, free run on DATA_EMPS_PULSES)",
                        source="EMPS benchmark (Janot, Gautier, Brunot 2019): force = gtau * vir, "
                               "output qm; free-run errors on DATA_EMPS_PULSES",
                        units=EMPS_UNITS)
-    _emps_benchmark(sel, p, Path(out_dir))
-    selp = analyse("rigid_axis", p["t"], {"tau": p["force"], "q": p["qm"]}, free_run=False)
+    _emps_benchmark(sel, p, Path(out_dir), ticker)
+    with ticker("the residual loop on DATA_EMPS_PULSES"):
+        selp = analyse("rigid_axis", p["t"], {"tau": p["force"], "q": p["qm"]}, free_run=False)
     write_report(selp, Path(out_dir) / "pulses", title="EMPS DATA_EMPS_PULSES",
                  source="EMPS benchmark, DATA_EMPS_PULSES (pulses inside vir)", units=EMPS_UNITS)
     return out
 
 
-def _emps_benchmark(sel, p: dict, out_dir: Path) -> None:
+def _emps_benchmark(sel, p: dict, out_dir: Path, ticker) -> None:
     """nonlinearbenchmark.org's EMPS protocol: the declared and final models (fitted on
     DATA_EMPS) simulated on DATA_EMPS_PULSES; printed beside the published results and written
     to ``benchmark.json``."""
     from cdam_core.base.jsonio import write_json_atomic
     from cdam_core.evaluate.simulation import EMPS_PROTOCOL, EMPS_PUBLISHED
     from cdam_core.residual.benchmark import protocol_scores
-    sc = protocol_scores(sel, {"t": p["t"], "tau": p["force"], "q": p["qm"]},
-                         EMPS_PROTOCOL["n_init"], EMPS_PROTOCOL["scale"])
-    rows = [(f"cdam {k} model ({', '.join(e.key for e in f.effects) or 'no effects'})",
-             v.rmse[0] if v.status == "ok" else None, v.reason or "this run")
-            for (k, v), f in zip(sc.items(), (sel.declared, sel.final))]
-    rows.append(_arx_baseline(p))
-    rows.append(_simulation_error_baseline(sel, p))
+    with ticker("the benchmark protocol: the models and two baselines simulated"):
+        sc = protocol_scores(sel, {"t": p["t"], "tau": p["force"], "q": p["qm"]},
+                             EMPS_PROTOCOL["n_init"], EMPS_PROTOCOL["scale"])
+        rows = [(f"cdam {k} model ({', '.join(e.key for e in f.effects) or 'no effects'})",
+                 v.rmse[0] if v.status == "ok" else None, v.reason or "this run")
+                for (k, v), f in zip(sc.items(), (sel.declared, sel.final))]
+        rows.append(_arx_baseline(p))
+        rows.append(_simulation_error_baseline(sel, p))
     rows += list(EMPS_PUBLISHED)
     print(f"EMPS benchmark (train DATA_EMPS, test DATA_EMPS_PULSES, first "
           f"{EMPS_PROTOCOL['n_init']} samples of qm given, simulation RMSE of qm):")
@@ -108,8 +114,9 @@ def _arx_baseline(p: dict) -> tuple:
             sc.rmse[0] if sc.status == "ok" else None, sc.reason or "this run")
 
 
-def flight_report(out_dir, seed: int = 3) -> Path:
+def flight_report(out_dir, seed: int = 3, ticker=None) -> Path:
     """Write the report of a simulated flight with a hidden thrust loss into ``out_dir``."""
+    ticker = ticker or (lambda what: nullcontext())
     from cdam_core.sim import simulate_flight
     from cdam_core.sim.parameters import plant_dict, plant_vector, total_mass
     from cdam_core.models.greybox.registry import get_model
@@ -119,7 +126,9 @@ def flight_report(out_dir, seed: int = 3) -> Path:
                          declare=["arm_coupling"])
     sig = {k: ds.column(k) for k in get_model("aerial_manipulator").signals}
     m = total_mass(plant_dict(plant_vector()), with_payload=False)
-    sel = analyse("aerial_manipulator", ds.t, sig, fixed={"m": m}, declared=("arm_coupling",))
+    with ticker("the residual loop on the simulated flight"):
+        sel = analyse("aerial_manipulator", ds.t, sig, fixed={"m": m},
+                      declared=("arm_coupling",))
     return write_report(sel, out_dir, title="simulated flight, hidden thrust loss",
                         source=f"cdam_core.sim.simulate_flight('both', 10 s, seed {seed}, "
                                f"effects=['thrust_loss'], declare=['arm_coupling'])")
@@ -131,7 +140,13 @@ def main(argv=None) -> int:
     ap.add_argument("example", choices=["emps", "flight"])
     ap.add_argument("out_dir")
     a = ap.parse_args(argv)
-    path = emps_report(a.out_dir) if a.example == "emps" else flight_report(a.out_dir)
+    from cdam_core.cli.common import elapsed_ticker
+    a.command = f"example {a.example}"
+
+    def ticker(what):                             # the seconds elapsed, on a terminal only
+        return elapsed_ticker(a, what)
+    path = emps_report(a.out_dir, ticker) if a.example == "emps" else \
+        flight_report(a.out_dir, ticker=ticker)
     print(f"wrote {path}")
     return 0
 

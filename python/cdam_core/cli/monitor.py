@@ -31,7 +31,7 @@ def register(subparsers) -> None:
     p.add_argument("--paths", type=int, default=1000,
                    help="simulated in-control paths per output for the thresholds (--calibrate)")
     p.add_argument("--seed", type=int, default=0, help="seed of the simulation (--calibrate)")
-    add_outputs(p, report=False)
+    add_outputs(p)
     p.set_defaults(func=run)
 
 
@@ -45,7 +45,10 @@ def run(args) -> int:
     from cdam_core.record.stack import stack_records
 
     check_io(inputs=[("MODEL", args.model), ("RECORD", args.record)],
-             files=[("--json", args.json), ("--calibrate", args.calibrate)])
+             files=[("--json", args.json), ("--calibrate", args.calibrate)],
+             folders=[("--report", args.report)])
+    if args.report and args.calibrate:
+        raise CliError("--report: a report of the alarms on a record; not with --calibrate")
     if args.paths < 100:
         raise CliError(f"--paths: at least 100, got {args.paths}")
     if args.seed < 0:
@@ -92,6 +95,14 @@ def run(args) -> int:
           "monitor": mf.monitor}
     if args.json:
         write_json(args.json, js)
+    if args.report:
+        from cdam_core.report.monitor import write_monitor_report
+        md = write_monitor_report(args.report, st.t, list(mf.outputs), res, mf.monitor, alarms,
+                                  title=f"Residual monitor: {mf.kind} model on {args.record}",
+                                  source=f"model {args.model} (sha256 {mf.sha256[:12]}...), "
+                                         f"record {args.record}",
+                                  units={o: u for o, u in st.datasets[0].units.items() if u})
+        note(args, f"report: {md}")
     print(f"{mf.kind} model {args.model} on {args.record}: {int(valid.sum())} rows monitored, "
           f"{len(alarms)} alarm(s)")
     for a in alarms[:50]:

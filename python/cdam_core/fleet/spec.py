@@ -194,14 +194,19 @@ def _records(doc, base: Path) -> list[str]:
         raise ValueError("spec.records: expected a glob or a non-empty list of globs")
     records = []
     for g in globs:
+        where = f"from {base}"
         if g.startswith("shared:"):
             from cdam_core.record.realdata import shared_data_dir
-            pattern = str(shared_data_dir() / g[len("shared:"):])
+            shared = shared_data_dir()
+            pattern = str(shared / g[len("shared:"):])
+            where = (f"in the shared data folder {shared}, set by CDAM_SHARED_DATA, else "
+                     "../shared/data beside the checkout: these records are not in the "
+                     "repository")
         else:
             pattern = g if Path(g).is_absolute() else str(base / g)
         found = sorted(glob.glob(pattern))
         if not found:
-            raise ValueError(f"spec.records: {g!r} matches no file (from {base})")
+            raise ValueError(f"spec.records: {g!r} matches no file ({where})")
         records += [f for f in map(os.path.abspath, found) if f not in records]
     return records
 

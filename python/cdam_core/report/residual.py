@@ -272,7 +272,9 @@ def write_report(sel: Selection, out_dir, title: str | None = None, source: str 
         lines += [f"| {u['channel']} | {u['kind']} | {u['frequency_hz']:.2f} | "
                   + (f"{u['prominence_decades']:.2f} decades above its base"
                      if "prominence_decades" in u else
-                     f"amplitude {u['amplitude']:.3g} (x{u['ratio_to_background']:.3g} "
+                     f"amplitude {u['amplitude']:.3g}"
+                     f"{(' ' + channel_unit(sel.model.name, u['channel'], units)).rstrip()} "
+                     f"(x{u['ratio_to_background']:.3g} "
                      f"the background, p {u['p_value']:.2g})") + " |"
                   for u in sel.unexplained]
         lines += ["", "No library effect explains these; they are reported, not fitted."]
