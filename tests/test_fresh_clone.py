@@ -151,10 +151,11 @@ def _nothing_tracked_changed(repo):
 
 def test_what_needs_the_shared_flights_says_they_are_absent(clone):
     repo, env = clone
-    r = _bash(repo, env, _inline(".venv/bin/python docs/examples/nanodrone/cross_trajectory"))
-    assert r.returncode == 3 and r.stdout == ""
-    assert "Traceback" not in r.stderr and r.stderr.count("\n") == 1
-    assert "CDAM_SHARED_DATA" in r.stderr and "not in the repository" in r.stderr
+    for prefix in ("cross_trajectory.py out/nanodrone", "cross_trajectory.py out/papernets"):
+        r = _bash(repo, env, _inline(".venv/bin/python docs/examples/nanodrone/" + prefix))
+        assert r.returncode == 3 and r.stdout == "", prefix
+        assert "Traceback" not in r.stderr and r.stderr.count("\n") == 1, prefix
+        assert "CDAM_SHARED_DATA" in r.stderr and "not in the repository" in r.stderr
     # the batch over the same flights: exit 2 (a missing input), one line naming the variable,
     # and nothing written
     r = _bash(repo, env, _fenced("nanodrone_crossfold.json"))

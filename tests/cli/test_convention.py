@@ -152,4 +152,4 @@ def test_long_runs_show_elapsed_time_on_a_terminal_only(monkeypatch, tty, quiet)
         assert err.text == ""
     src = (Path(__file__).resolve().parents[2] / "python" / "cdam_core" / "cli"
            / "residual.py").read_text()
-    assert "with elapsed_ticker(args" in src
+    assert "elapsed_ticker(args" in src
