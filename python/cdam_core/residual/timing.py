@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import stats
 
-from cdam_core.models.greybox.estimation import design, fit
+from cdam_core.models.greybox.estimation import apply_fit, fit
 from cdam_core.residual.validation import FOLDS, MIN_WINDOWS, WINDOWS_PER_BLOCK, motion_horizon
 
 __all__ = ["choose_timing", "held_out_equation_error"]
@@ -34,19 +34,14 @@ def held_out_equation_error(model, sig, effects, trim: int, folds: int = FOLDS) 
     (each block predicted by the fit on the others), in the record's order."""
     n = np.asarray(sig["t"]).size
     edges = np.linspace(0, n, folds + 1).astype(int)
-    _, eqs = design(model, sig, effects)
     out = []
     for a, b in zip(edges[:-1], edges[1:]):
         mask = np.ones(n, dtype=bool)
         mask[max(0, a - trim):min(n, b + trim)] = False
         f = fit(model, sig, effects, trim, rows=mask, bounded=True)
-        total = np.zeros(n)
-        for eq, (y, cols) in eqs.items():
-            r = np.broadcast_to(np.asarray(y, dtype=float), (n,)).copy()
-            for p, c in cols.items():
-                r -= f.theta[p] * np.broadcast_to(np.asarray(c, dtype=float), (n,))
-            total += r ** 2
-        out.append(total[max(a, trim):min(b, n - trim)])
+        # the fold's estimates on every row trim .. n - trim - 1 (apply_fit), summed over equations
+        total = sum(r ** 2 for r in apply_fit(f, sig, trim).residuals.values())
+        out.append(total[max(a, trim) - trim:min(b, n - trim) - trim])
     return np.concatenate(out)
 
 
