@@ -117,20 +117,8 @@ def run(args) -> int:
         units = {name: u for name, col in mapping.items() if (u := ds.units.get(col))}
         write_report(sel, args.report, title=Path(args.data).name, source=str(args.data),
                      units=units)
-    if not args.json:
-        print(json.dumps(js, indent=2))
-    else:
-        for f in js["findings"]:
-            print(f"found {f['effect']} on {f['channel']}: {f['parameters']}")
-        for u in js["unexplained"]:
-            what = ("a periodic component not in the inputs" if u["kind"] == "periodic_line"
-                    else "unexplained structure")
-            print(f"{what} on {u['channel']} at {u['frequency_hz']:.2f} Hz"
-                  + (f", amplitude {u['amplitude']:.3g}" if "amplitude" in u else ""))
-        for label, sc in (js.get("test") or {}).get("scores", {}).items():
-            print(f"test simulation ({label} model): " + (
-                ", ".join(f"{o} rmse {v:.4g}" for o, v in zip(js["test"]["outputs"], sc["rmse"]))
-                if sc["status"] == "ok" else f"{sc['status']}: {sc['reason']}"))
+    for line in _summary(js):
+        print(line)
     if not js.get("complete", True):
         print("cdam residual: analysis incomplete: a free run could not be computed (see "
               "'unavailable' in the JSON); everything else was written", file=sys.stderr)
@@ -192,6 +180,41 @@ def _save(path, sel, mapping: dict, ds, args) -> dict:
     return {"path": str(path), "kind": "greybox", "sha256": digest}
 
 
+def _summary(js: dict) -> list[str]:
+    """What a person reads on stdout (the whole result goes to --json FILE): the choices made,
+    the final parameters with their sigma, the findings, the unexplained lines, the test."""
+    st = js.get("settings", {})
+    out = [f"model {js['model']}"]
+    if (tm := st.get("timing")) and "chosen" in tm:
+        p = tm.get("p_value")
+        out.append(f"input timing: {tm['chosen']}" + (f" (p {p:.2g})" if p is not None else ""))
+    if (cut := (st.get("filter_choice") or {}).get("chosen_hz")):
+        out.append("derivative cut-offs: " + ", ".join(f"{k} {v:.3g} Hz" for k, v in cut.items()))
+    if (est := st.get("estimator")) and "chosen" in est:
+        out.append(f"estimator: {est['chosen']}")
+    std = js.get("final_std") or {}
+    out.append("final parameters (value, relative sigma):")
+    for k, v in (js.get("final_parameters") or {}).items():
+        s = std.get(k)
+        rel = (f"{100 * abs(s / v):.2g} %" if s is not None and v not in (0, None) and
+               math.isfinite(s) else "-")
+        out.append(f"  {k} {v:.5g} ({rel})")
+    for f in js["findings"]:
+        out.append(f"found {f['effect']} on {f['channel']}: {f['parameters']}")
+    if not js["findings"]:
+        out.append("no effect found")
+    for u in js["unexplained"]:
+        what = ("a periodic component not in the inputs" if u["kind"] == "periodic_line"
+                else "unexplained structure")
+        out.append(f"{what} on {u['channel']} at {u['frequency_hz']:.2f} Hz"
+                   + (f", amplitude {u['amplitude']:.3g}" if "amplitude" in u else ""))
+    for label, sc in (js.get("test") or {}).get("scores", {}).items():
+        out.append(f"test simulation ({label} model): " + (
+            ", ".join(f"{o} rmse {v:.4g}" for o, v in zip(js["test"]["outputs"], sc["rmse"]))
+            if sc["status"] == "ok" else f"{sc['status']}: {sc['reason']}"))
+    return out
+
+
 def register(subparsers) -> None:
     p = subparsers.add_parser(
         "residual", help="residual analysis: find the effect a declared model lacks",
@@ -206,7 +229,8 @@ def register(subparsers) -> None:
     p.add_argument("--outputs", help="comma-separated output columns")
     p.add_argument("--map", help="model signal names to columns, e.g. tau=force,q=qm, or a JSON "
                                  "file of them (the syntax of every --map)")
-    p.add_argument("--json", help="write the JSON result here")
+    p.add_argument("--json", metavar="FILE",
+                   help="also write the whole result as JSON to FILE (stdout has a summary)")
     p.add_argument("--test", help="test record (dataset CSV, same columns): the declared and "
                                   "the final model simulated open loop from its first --n-init "
                                   "outputs (nonlinearbenchmark.org's protocol), RMSE reported")
