@@ -1,5 +1,6 @@
 """`cdam residual` end to end on a small synthetic CSV."""
 import json
+import re
 
 import numpy as np
 import pytest
@@ -30,6 +31,25 @@ def test_cli_json_and_report(tmp_path):
     assert f["error_after"]["tau"]["rmse"] < f["error_before"]["tau"]["rmse"]
     assert (tmp_path / "rep" / "index.md").is_file()
     assert list((tmp_path / "rep").glob("finding_1_*.png"))
+
+
+def test_cli_stdout_is_a_summary_of_the_json(tmp_path, capsys):
+    """stdout has the summary a person reads (every final parameter with its relative sigma,
+    the findings), not the JSON: that goes to --json FILE, as for every command."""
+    rec = rigid_axis_record(seed=2, Fc=1.5, duration=6.0)
+    _csv(tmp_path / "r.csv", rec)
+    capsys.readouterr()
+    assert main(["residual", str(tmp_path / "r.csv"), "--model", "rigid_axis", "--map",
+                 "tau=force,q=pos", "--json", str(tmp_path / "o.json")]) == 0
+    out = capsys.readouterr().out
+    js = json.loads((tmp_path / "o.json").read_text())
+    assert not out.lstrip().startswith("{")
+    rows = dict(re.findall(r"^  (\S+) \S+ \((\S+) %\)$", out, flags=re.M))
+    assert set(rows) == set(js["final_parameters"])
+    for k, v in js["final_parameters"].items():
+        rel = 100 * abs(js["final_std"][k] / v)
+        assert float(rows[k]) == pytest.approx(rel, rel=0.05), k
+    assert f"found coulomb_friction on {js['findings'][0]['channel']}" in out
 
 
 def test_cli_saves_the_augmented_model(tmp_path):

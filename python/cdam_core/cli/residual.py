@@ -188,8 +188,11 @@ def _summary(js: dict) -> list[str]:
     if (tm := st.get("timing")) and "chosen" in tm:
         p = tm.get("p_value")
         out.append(f"input timing: {tm['chosen']}" + (f" (p {p:.2g})" if p is not None else ""))
-    if (cut := (st.get("filter_choice") or {}).get("chosen_hz")):
+    cut = (st.get("filter_choice") or {}).get("chosen_hz")
+    if isinstance(cut, dict):
         out.append("derivative cut-offs: " + ", ".join(f"{k} {v:.3g} Hz" for k, v in cut.items()))
+    elif cut is not None:
+        out.append(f"derivative cut-off: {cut:.3g} Hz")
     if (est := st.get("estimator")) and "chosen" in est:
         out.append(f"estimator: {est['chosen']}")
     std = js.get("final_std") or {}
