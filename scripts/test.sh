@@ -17,4 +17,4 @@ echo "== C++ unit tests and a hypothesis pass over _core under AddressSanitizer 
 bash scripts/sanitize.sh
 echo "== Python tests (pytest)"
 # run from tests/ so that the installed cdam_core (not the source tree) is imported
-.venv/bin/python -m pytest -m "not fuzz and not soak" -q -rs -p no:cacheprovider "$@" tests   # -rs: why each skip
+.venv/bin/python -m pytest -m "not fuzz and not soak" -q -rs --durations=30 -p no:cacheprovider "$@" tests   # -rs: why each skip; the 30 slowest (CI budget)
