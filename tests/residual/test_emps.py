@@ -141,8 +141,100 @@ def test_benchmark_protocol_reproduces_the_published_model():
     assert sc.rmse[0] == pytest.approx(8.4, abs=0.1)
 
 
+def _idim_plain(r):
+    """The published structure plus asymmetric viscous friction by plain least squares (zero-phase
+    30 Hz Butterworth on position and force, central differences, moving samples only):
+    [M, Fv-, Fc, offset, Fv+ - Fv-]."""
+    from scipy.signal import butter, filtfilt
+    b, a = butter(4, 30.0 / 500.0)
+    q = filtfilt(b, a, r["qm"])
+    v = np.gradient(q, 1e-3)
+    X = np.column_stack([np.gradient(v, 1e-3), v, np.sign(v), np.ones_like(v), v * (v > 0)])
+    m = np.abs(v) > 0.005
+    m[:200] = m[-200:] = False
+    th, *_ = np.linalg.lstsq(X[m], filtfilt(b, a, r["force"])[m], rcond=None)
+    return th
+
+
+def _protocol_plain(th, r, n0=20):
+    """The benchmark protocol with a plain simulator (semi-implicit Euler at the 1 kHz sampling,
+    force held over the sample, sign(0) = 0): RMSE of qm in mm after the first n0 samples."""
+    M, fv, fc, off, dfv = (float(x) for x in th)
+    F, Q = r["force"], r["qm"]
+    x, v = Q[n0 - 1], (Q[n0 - 1] - Q[n0 - 2]) / 1e-3
+    out = np.empty(Q.size)
+    out[:n0] = Q[:n0]
+    for k in range(n0 - 1, Q.size - 1):
+        s = 1.0 if v > 0 else (-1.0 if v < 0 else 0.0)
+        v += 1e-3 * (F[k] - fv * v - fc * s - off - (dfv * v if v > 0 else 0.0)) / M
+        x += 1e-3 * v
+        out[k + 1] = x
+    return 1000.0 * float(np.sqrt(np.mean((out[n0:] - Q[n0:]) ** 2)))
+
+
+def test_pulses_friction_level_is_not_data_emps():
+    """Why the protocol target is open (plain numpy, independent of the package): the two records
+    share the trajectory, but PULSES's friction is about 1 N higher in both directions (moving
+    samples away from the pulse edges; measured +0.91 / -1.11 N), so the same structure fitted on
+    either record simulates that record to <= 3.5 mm under the protocol (measured 2.8 and 2.3 mm)
+    while DATA_EMPS's parameters score 11.8 mm on PULSES: the open-loop score of an integrating
+    axis is set by the friction level, which DATA_EMPS cannot tell for the other record. The
+    halves of DATA_EMPS differ the same way (its viscous friction drifts by 3 % over 25 s)."""
+    d, p = load_emps("DATA_EMPS"), load_emps("DATA_EMPS_PULSES")
+    assert np.max(np.abs(p["qm"] - d["qm"])) < 5e-4              # the same motion (0.17 mm)
+    v = np.gradient(d["qm"], 1e-3)
+    df = p["force"] - d["force"]
+    quiet = np.ones(df.size, dtype=bool)
+    for k in np.flatnonzero(np.abs(np.diff(p["pulses"])) > 1) + 1:
+        quiet[max(k - 5, 0):k + 150] = False                      # the edges and the loop's reply
+    assert np.mean(df[quiet & (v > 0.01)]) > 0.5                  # more force to move forward
+    assert np.mean(df[quiet & (v < -0.01)]) < -0.5                # and backward
+    te, tp = _idim_plain(d), _idim_plain(p)
+    assert abs(tp[0] / te[0] - 1) < 0.02                          # M: -1.2 %
+    assert tp[1] / te[1] - 1 > 0.02 and tp[2] / te[2] - 1 > 0.01  # Fv- +3.5 %, Fc +1.9 %
+    assert _protocol_plain(te, d) < 3.5 and _protocol_plain(tp, p) < 3.5
+    assert _protocol_plain(te, p) > 8.0
+    # the same within DATA_EMPS: each half's fit simulates its own half to 1.1 / 1.7 mm and the
+    # other half to 7.2 / 6.1 mm (measured), above the 6 mm target on a record it never saw
+    n = d["qm"].size // 2
+    halves = [{k: d[k][sl] for k in ("qm", "force")} for sl in (slice(0, n), slice(n, None))]
+    for i, h in enumerate(halves):
+        th = _idim_plain(h)
+        assert _protocol_plain(th, h) < 2.5 and _protocol_plain(th, halves[1 - i]) > 5.0
+
+
+def test_asymmetric_friction_holds_over_long_held_out_windows(emps_selection):
+    """The step that raises the PULSES score is no artefact of short validation windows: fitted
+    (IDIM-LS, bounded) on four fifths of DATA_EMPS, the model with asymmetric friction simulates
+    every 2.4 s window of the held-out fifth from 20 measured samples better than the one with
+    symmetric friction (measured RMS 1.4 against 3.6 mm; 4.8 s windows 2.1 against 3.9 mm)."""
+    from cdam_core.models.greybox.effects import AsymmetricFriction, CoulombFriction
+    from cdam_core.models.greybox.estimation import fit
+    sel = emps_selection
+    m, sig = sel.declared.model, sel.declared.signals
+    d = load_emps("DATA_EMPS")
+    n, H = d["qm"].size, 2400
+    edges = np.linspace(0, n, 6).astype(int)
+    err = {"sym": [], "asym": []}
+    for a, b in zip(edges[:-1], edges[1:]):
+        rows = np.ones(n, dtype=bool)
+        rows[max(a - 50, 0):b + 50] = False
+        for name, eff in (("sym", (CoulombFriction("tau"),)),
+                          ("asym", (CoulombFriction("tau"), AsymmetricFriction("tau")))):
+            th = fit(m, sig, eff, 50, rows=rows, bounded=True).theta
+            vec = [th["M"], th["Fv"], th["coulomb_friction@tau.Fc"], th.get("offset", 0.0),
+                   th.get("asymmetric_friction@tau.dFv", 0.0)]
+            for s0 in range(max(a, 60), b - H, H):
+                w = {k: d[k][s0 - 20:s0 + H] for k in ("qm", "force")}
+                err[name].append(_protocol_plain(vec, w))
+    e0, e1 = np.array(err["sym"]), np.array(err["asym"])
+    assert e0.size == 10 and np.all(e1 < e0), (e0, e1)
+
+
 @pytest.mark.xfail(strict=True, reason="issue [greybox]: target <= 6 mm on the protocol; the "
-                                        "final model of today's residual loop is not there")
+                                        "final model (12.3 mm) is not there: PULSES's friction "
+                                        "is ~1 N above DATA_EMPS's (test_pulses_friction_level_"
+                                        "is_not_data_emps), which DATA_EMPS cannot tell")
 def test_residual_final_model_meets_the_benchmark_target(emps_selection):
     """The residual loop's final model (DATA_EMPS), simulated on DATA_EMPS_PULSES under the
     protocol, at or below the issue's 6 mm target (published IDIM-LS: 8.4 mm)."""
