@@ -3,6 +3,8 @@ numpy float32 twins of the firmware's step written from the equations (docs/MODE
 module docs of cdam_core.models.arx and greybox.augmented), not from the exporter."""
 from __future__ import annotations
 
+import re
+
 import numpy as np
 
 from cdam_core.models import ArxModel
@@ -376,3 +378,26 @@ def quad_twin32(model, U, Y, mode):
         unit(x)
         out.append(x.copy())
     return np.array(out, f32)
+
+
+# ---- reading a generated header, and the nano-drone flights (the flight kinds' tests) ----
+
+def header_array(text, name):
+    """The values of ``constexpr float name[n] = {...};`` in a generated header."""
+    m = re.search(rf"constexpr float {name}\[(\d+)\] = \{{(.*?)\}};", text, re.S)
+    assert m, name
+    return np.array([float(v.strip().rstrip("f")) for v in m.group(2).split(",")])
+
+
+def header_int(text, name):
+    """The value of ``constexpr int name = n;`` in a generated header."""
+    return int(re.search(rf"constexpr int {name} = (-?\d+);", text).group(1))
+
+
+def nanodrone_flight(folder, name):
+    """(U, Y) of the longest segment of a nano-drone flight (no seam inside)."""
+    from cdam_core.record.realdata.nanodrone import INPUTS, STATES, load_nanodrone
+    ds = load_nanodrone(folder / f"{name}.parquet")
+    a, b = max(ds.segments, key=lambda s: s[1] - s[0])
+    return (np.column_stack([ds.column(c) for c in INPUTS])[a:b],
+            np.column_stack([ds.column(c) for c in STATES])[a:b])
