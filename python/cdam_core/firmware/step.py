@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from cdam_core.base.orders import parse_orders
+from cdam_core.evaluate.monitor import watched_channels
 from cdam_core.firmware.numbers import c_array, c_float, c_int_array, finite32, theta_fnv1a
 
 KIND_CODES = {"bp_network": 0, "arx": 1, "hybrid": 2, "greybox": 3, "quad_physics": 4,
@@ -147,7 +148,7 @@ def step_model(mf, source: str = "") -> StepFirmwareModel:
     return fm
 
 
-MONITOR_ARRAYS = ("kMonMean", "kMonStd", "kMonH", "kMonEwmaLimit")
+MONITOR_ARRAYS = ("kMonMean", "kMonStd", "kMonH", "kMonEwmaLimit", "kMonWatch")
 
 
 def _monitor(fm: StepFirmwareModel, mf) -> None:
@@ -160,6 +161,9 @@ def _monitor(fm: StepFirmwareModel, mf) -> None:
     fm.floats.update({"kMonK": float(sec["k"]), "kMonLambda": float(sec["lambda"])})
     for name, key in zip(MONITOR_ARRAYS, ("mean", "std", "h", "ewma_limit")):
         fm.arrays[name] = np.asarray(sec[key], np.float64)
+    # 1 for a watched output, 0 for one that never alarms (evaluate.monitor: a unit
+    # quaternion's largest component); all 1 for a section without the field
+    fm.arrays["kMonWatch"] = watched_channels(sec).astype(np.float64)
 
 
 def _arx(mf) -> StepFirmwareModel:
