@@ -298,6 +298,29 @@ def quad_physics_file(path, meta=None):
     return path, U, Y
 
 
+QUAD_HYBRID_N_FIT = 600   # rows of the 8 s flight the quad_hybrid model is fitted on
+
+
+def quad_hybrid_file(path, meta=None, monitor=False):
+    """A small quad_hybrid (4 tanh units, 3 rotor lags, 10-step windows, 5 LM epochs) fitted on
+    the first 6 s of an 8 s flight of the independent generator with a 30 ms rotor lag the
+    physics lacks; with ``monitor``, its monitor section calibrated on those 6 s. Returns
+    (path, U, Y) of the whole flight (rows QUAD_HYBRID_N_FIT.. are held out)."""
+    import sys
+    from pathlib import Path
+    from cdam_core.evaluate.monitor import calibrate
+    from cdam_core.models.flight.hybrid import QuadHybrid
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "models"))
+    from quad_generator import flight
+    U, Y, _ = flight(seconds=8.0, seed=3, lag=QUAD_LAG)
+    n = QUAD_HYBRID_N_FIT
+    m = QuadHybrid(hidden=4, lags=3, horizon=10, epochs=5, threads=1).fit(U[:n], Y[:n])
+    save_model(path, m, inputs=[f"rotor_speed_m{k}" for k in range(1, 5)],
+               outputs=[f"state_{k}" for k in range(13)], meta=meta,
+               monitor=calibrate(m, U[:n], Y[:n], 0.01, paths=200, seed=0) if monitor else None)
+    return path, U, Y
+
+
 def quad_twin32(model, U, Y, mode):
     """quad_physics in float32, written from the model's module doc (one RK4 step of dt per
     sample, drive held; the quaternion normalised before and after), every operation rounded

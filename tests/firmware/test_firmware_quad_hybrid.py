@@ -3,9 +3,9 @@ firmware: export (numbers only, no toolchain needed), and the run on the emulate
 against the Python model with its residual monitor (QEMU, skipped without the toolchain).
 
 The model is a small quad_hybrid (4 tanh units, 3 rotor lags, 10-step windows, 5 LM epochs:
-a 0.1 s fit) on the first 6 s of an 8 s flight of the independent numpy generator
-(tests/models/quad_generator.py) with a 30 ms rotor lag the physics lacks; the last 2 s are
-held out. The nano-drone case fits the documented structure (8 units, 6 lags, K = 50) on a
+a 0.1 s fit; tests/firmware/_kinds.py) on the first 6 s of an 8 s flight of the independent
+numpy generator (tests/models/quad_generator.py) with a 30 ms rotor lag the physics lacks; the
+last 2 s are held out. The nano-drone case fits the documented structure (8 units, 6 lags, K = 50) on a
 stretch of a real flight and runs a square flight it never saw.
 
 Tolerance of one step against the Python model (float64), derived a priori from the model's own
@@ -37,12 +37,11 @@ from quad_generator import TRUTH, flight  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _kinds import header_array as _array, header_int as _int  # noqa: E402
-from _kinds import nanodrone_flight  # noqa: E402
+from _kinds import QUAD_HYBRID_N_FIT as N_FIT, nanodrone_flight, quad_hybrid_file  # noqa: E402
 
 EPS = 2.0 ** -23
 HOSTILE = '"); system("rm -rf /'
 FLIGHTS = shared_data_dir() / "nanodrone"
-N_FIT = 600
 
 needs_toolchain = pytest.mark.skipif(fw.toolchain_available() is not None,
                                      reason=f"firmware toolchain: {fw.toolchain_available()}")
@@ -55,15 +54,9 @@ def _gamma(n):
 @pytest.fixture(scope="module")
 def hybrid(tmp_path_factory):
     """(path, U, Y, monitored path): the small quad_hybrid, and the same with a monitor."""
-    from cdam_core.evaluate.monitor import calibrate
-    U, Y, _ = flight(seconds=8.0, seed=3, lag=0.03)
-    m = QuadHybrid(hidden=4, lags=3, horizon=10, epochs=5, threads=1).fit(U[:N_FIT], Y[:N_FIT])
     folder = tmp_path_factory.mktemp("qh")
-    path = folder / "qh.json"
-    save_model(path, m, inputs=[f"rotor_speed_m{k}" for k in range(1, 5)],
-               outputs=[f"state_{k}" for k in range(13)], meta={"note": HOSTILE})
-    mon = folder / "qh_mon.json"
-    save_model(mon, m, monitor=calibrate(m, U[:N_FIT], Y[:N_FIT], 0.01, paths=200, seed=0))
+    path, U, Y = quad_hybrid_file(folder / "qh.json", meta={"note": HOSTILE})
+    mon = quad_hybrid_file(folder / "qh_mon.json", monitor=True)[0]
     return path, U, Y, mon
 
 
