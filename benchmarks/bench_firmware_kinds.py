@@ -2,7 +2,7 @@
 without them): `cdam firmware check` on one model of each kind, built here from the test
 builders (tests/firmware/_kinds.py) and, where the shared data are there, from the EMPS record
 (an ARX(2, 2, 1) and the grey-box model the residual loop finds on DATA_EMPS) and a nano-drone
-flight (quad_physics).
+flight (quad_physics and quad_hybrid).
 
 "ratio": the 1 kHz loop's budget on a 168 MHz STM32F405 (168,000 cycles) over the instructions
 per step of the costliest kind measured in this run (one instruction a cycle, a lower bound on
@@ -51,10 +51,12 @@ def _emps_models(tmp: Path) -> dict:
 
 
 def _nanodrone_model(tmp: Path) -> dict:
-    """quad_physics (the documented defaults) fitted on the longest clean stretch of the
-    nano-drone flight random1 run 1 ({} without the flights)."""
+    """quad_physics and quad_hybrid (the documented defaults: 8 units, 6 lags, K = 50)
+    fitted on the longest clean stretch of the nano-drone flight random1 run 1 ({} without
+    the flights)."""
     import numpy as np
     from cdam_core.models import save_model
+    from cdam_core.models.flight.hybrid import QuadHybrid
     from cdam_core.models.flight.physics import QuadPhysics
     from cdam_core.record.realdata import shared_data_dir
     from cdam_core.record.realdata.nanodrone import INPUTS, STATES, load_nanodrone
@@ -66,7 +68,9 @@ def _nanodrone_model(tmp: Path) -> dict:
     U = np.column_stack([ds.column(c) for c in INPUTS])[a:b]
     Y = np.column_stack([ds.column(c) for c in STATES])[a:b]
     save_model(tmp / "nano.json", QuadPhysics(dt=0.01).fit(U, Y))
-    return {"quad_physics_nanodrone": tmp / "nano.json"}
+    save_model(tmp / "nano_hybrid.json", QuadHybrid(dt=0.01, threads=1).fit(U, Y))
+    return {"quad_physics_nanodrone": tmp / "nano.json",
+            "quad_hybrid_nanodrone": tmp / "nano_hybrid.json"}
 
 
 def _models(tmp: Path, network: dict) -> dict:
@@ -80,6 +84,7 @@ def _models(tmp: Path, network: dict) -> dict:
             "greybox_quadrotor_4_effects": k.quadrotor_file(tmp / "quad.json"),
             "greybox_aerial_manipulator_6_effects": k.aerial_file(tmp / "aerial.json"),
             "quad_physics_lag_damping_reaction": k.quad_physics_file(tmp / "quad_physics.json")[0],
+            "quad_hybrid_4_units_3_lags": k.quad_hybrid_file(tmp / "quad_hybrid.json")[0],
             **_nanodrone_model(tmp)}
 
 

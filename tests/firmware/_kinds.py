@@ -3,6 +3,8 @@ numpy float32 twins of the firmware's step written from the equations (docs/MODE
 module docs of cdam_core.models.arx and greybox.augmented), not from the exporter."""
 from __future__ import annotations
 
+import re
+
 import numpy as np
 
 from cdam_core.models import ArxModel
@@ -296,6 +298,29 @@ def quad_physics_file(path, meta=None):
     return path, U, Y
 
 
+QUAD_HYBRID_N_FIT = 600   # rows of the 8 s flight the quad_hybrid model is fitted on
+
+
+def quad_hybrid_file(path, meta=None, monitor=False):
+    """A small quad_hybrid (4 tanh units, 3 rotor lags, 10-step windows, 5 LM epochs) fitted on
+    the first 6 s of an 8 s flight of the independent generator with a 30 ms rotor lag the
+    physics lacks; with ``monitor``, its monitor section calibrated on those 6 s. Returns
+    (path, U, Y) of the whole flight (rows QUAD_HYBRID_N_FIT.. are held out)."""
+    import sys
+    from pathlib import Path
+    from cdam_core.evaluate.monitor import calibrate
+    from cdam_core.models.flight.hybrid import QuadHybrid
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "models"))
+    from quad_generator import flight
+    U, Y, _ = flight(seconds=8.0, seed=3, lag=QUAD_LAG)
+    n = QUAD_HYBRID_N_FIT
+    m = QuadHybrid(hidden=4, lags=3, horizon=10, epochs=5, threads=1).fit(U[:n], Y[:n])
+    save_model(path, m, inputs=[f"rotor_speed_m{k}" for k in range(1, 5)],
+               outputs=[f"state_{k}" for k in range(13)], meta=meta,
+               monitor=calibrate(m, U[:n], Y[:n], 0.01, paths=200, seed=0) if monitor else None)
+    return path, U, Y
+
+
 def quad_twin32(model, U, Y, mode):
     """quad_physics in float32, written from the model's module doc (one RK4 step of dt per
     sample, drive held; the quaternion normalised before and after), every operation rounded
@@ -376,3 +401,26 @@ def quad_twin32(model, U, Y, mode):
         unit(x)
         out.append(x.copy())
     return np.array(out, f32)
+
+
+# ---- reading a generated header, and the nano-drone flights (the flight kinds' tests) ----
+
+def header_array(text, name):
+    """The values of ``constexpr float name[n] = {...};`` in a generated header."""
+    m = re.search(rf"constexpr float {name}\[(\d+)\] = \{{(.*?)\}};", text, re.S)
+    assert m, name
+    return np.array([float(v.strip().rstrip("f")) for v in m.group(2).split(",")])
+
+
+def header_int(text, name):
+    """The value of ``constexpr int name = n;`` in a generated header."""
+    return int(re.search(rf"constexpr int {name} = (-?\d+);", text).group(1))
+
+
+def nanodrone_flight(folder, name):
+    """(U, Y) of the longest segment of a nano-drone flight (no seam inside)."""
+    from cdam_core.record.realdata.nanodrone import INPUTS, STATES, load_nanodrone
+    ds = load_nanodrone(folder / f"{name}.parquet")
+    a, b = max(ds.segments, key=lambda s: s[1] - s[0])
+    return (np.column_stack([ds.column(c) for c in INPUTS])[a:b],
+            np.column_stack([ds.column(c) for c in STATES])[a:b])

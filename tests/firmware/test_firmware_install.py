@@ -29,7 +29,8 @@ def test_installed_package_ships_the_firmware_sources():
     for rel in ("CMakeLists.txt", "cmake/arm-none-eabi.cmake", "netduinoplus2.ld",
                 "src/startup.cpp", "src/main_step_check.cpp", "include/fw/step_model.hpp",
                 "src/main_monitor_pil.cpp", "include/fw/monitor_pil.hpp",
-                "include/fw/slcan_port.hpp",
+                "include/fw/slcan_port.hpp", "include/fw/quad_body.hpp",
+                "include/fw/quad_physics_step.hpp", "include/fw/quad_hybrid_step.hpp",
                 "generated/model.hpp", "generated/optim_data.hpp"):
         assert (fw.FIRMWARE_DIR / rel).is_file(), rel
     assert (fw.FIRMWARE_DIR.parent / "cpp" / "include" / "cdam" / "mlp.hpp").is_file()

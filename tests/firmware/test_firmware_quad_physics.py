@@ -22,7 +22,6 @@ estimate), so the free run must also stay within 1e-4 of each state's span, the 
 other kinds' free runs are held to (tests/firmware/test_firmware_kinds_qemu.py).
 """
 import json
-import re
 import sys
 from pathlib import Path
 
@@ -37,6 +36,8 @@ from cdam_core.record.realdata import shared_data_dir
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _kinds import QUAD_N_FIT as N_FIT, quad_physics_file, quad_twin32  # noqa: E402
+from _kinds import header_array as _array, header_int as _int  # noqa: E402
+from _kinds import nanodrone_flight  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "models"))
 
@@ -57,16 +58,6 @@ def quad(tmp_path_factory):
 def bdir(tmp_path_factory):
     """One build folder for the quad model's tests (a rebuild there is incremental)."""
     return tmp_path_factory.mktemp("fw_quad")
-
-
-def _array(text, name):
-    m = re.search(rf"constexpr float {name}\[(\d+)\] = \{{(.*?)\}};", text, re.S)
-    assert m, name
-    return np.array([float(v.strip().rstrip("f")) for v in m.group(2).split(",")])
-
-
-def _int(text, name):
-    return int(re.search(rf"constexpr int {name} = (-?\d+);", text).group(1))
 
 
 def test_header_holds_the_file_numbers_only(quad, tmp_path):
@@ -200,15 +191,6 @@ def test_cli_check_on_the_default_record(quad, bdir, tmp_path):
     assert HOSTILE not in json.dumps(rep) and "rotor_speed" not in json.dumps(rep)
 
 
-def _flight(name):
-    """(U, Y) of the longest segment of a nano-drone flight (no seam inside)."""
-    from cdam_core.record.realdata.nanodrone import INPUTS, STATES, load_nanodrone
-    ds = load_nanodrone(FLIGHTS / f"{name}.parquet")
-    a, b = max(ds.segments, key=lambda s: s[1] - s[0])
-    return (np.column_stack([ds.column(c) for c in INPUTS])[a:b],
-            np.column_stack([ds.column(c) for c in STATES])[a:b])
-
-
 @pytest.mark.slow
 @needs_toolchain
 @pytest.mark.skipif(not (FLIGHTS / "square_20251017_run2.parquet").is_file(),
@@ -216,11 +198,11 @@ def _flight(name):
 def test_nanodrone_flight_model_on_the_board(tmp_path):
     """Fitted on the longest clean stretch of random1 run 1 (the documented defaults: rates
     dynamic, delays chosen), checked on 3 s of a square flight it never saw."""
-    U, Y = _flight("random1_20251017_run1")
+    U, Y = nanodrone_flight(FLIGHTS, "random1_20251017_run1")
     m = QuadPhysics(dt=0.01).fit(U, Y)
     path = tmp_path / "nano.json"
     save_model(path, m)
-    Ut, Yt = _flight("square_20251017_run2")
+    Ut, Yt = nanodrone_flight(FLIGHTS, "square_20251017_run2")
     u, y = Ut[:300], Yt[:300]
     rep = fw.check(path, build_dir=tmp_path / "b", record=(u, y))
     print("nano-drone", rep)

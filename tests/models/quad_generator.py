@@ -81,11 +81,14 @@ def _mixer_inverse(T, tau, tr):
     return np.linalg.solve(M, np.r_[T, tau])
 
 
-def flight(seconds=30.0, dt=0.01, seed=0, truth=TRUTH, noise=NOISE, excite=1.0, lag=0.0):
+def flight(seconds=30.0, dt=0.01, seed=0, truth=TRUTH, noise=NOISE, excite=1.0, lag=0.0,
+           effect=None):
     """(U (N, 4) rotor speeds in rad/s, Y (N, 13) measured states, Ytrue (N, 13)).
     ``lag`` (s): the rotors' thrust and drag torque follow the logged speed squared through a
     first-order lag of this time constant (integrated with the body, exact exponential per
-    sub-step); 0: at once."""
+    sub-step); 0: at once. ``effect`` (t_s, plant): from t_s seconds on, the plant runs with
+    the parameter dict ``plant`` (a thrust loss, a payload, ...) while the controller keeps
+    ``truth``."""
     rng = np.random.default_rng(seed)
     n = int(round(seconds / dt))
     t = np.arange(n) * dt
@@ -146,15 +149,16 @@ def flight(seconds=30.0, dt=0.01, seed=0, truth=TRUTH, noise=NOISE, excite=1.0, 
         # plant: RK4 sub-steps with the rotor speeds held (the lagged ones per sub-step)
         if act is None:
             act = om2.copy()
+        plant = truth if effect is None or t[k] < effect[0] else effect[1]
         for _ in range(SUB):
             if lag > 0:
                 act = om2 + (act - om2) * np.exp(-h / lag)
             else:
                 act = om2
-            k1 = _deriv(s, act, truth)
-            k2 = _deriv(s + 0.5 * h * k1, act, truth)
-            k3 = _deriv(s + 0.5 * h * k2, act, truth)
-            k4 = _deriv(s + h * k3, act, truth)
+            k1 = _deriv(s, act, plant)
+            k2 = _deriv(s + 0.5 * h * k1, act, plant)
+            k3 = _deriv(s + 0.5 * h * k2, act, plant)
+            k4 = _deriv(s + h * k3, act, plant)
             s = s + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
             s[6:15] = _orthonormal(s[6:15].reshape(3, 3)).ravel()
     return U, Y, Yt

@@ -2,9 +2,10 @@
 // the same float32 order): per output c, with the measured y and the one-step prediction p,
 //   r = y - p;  z = (r - mean_c) / std_c;  e = e + lam (z - e);
 //   up = max(0, (up + z) - k);  dn = max(0, (dn - z) - k);
-//   flags = CUSUM_UP [up > h_c] | CUSUM_DOWN [dn > h_c] | EWMA [|e| > L_c];
+//   flags = CUSUM_UP [up > h_c] | CUSUM_DOWN [dn > h_c] | EWMA [|e| > L_c]  (0 when the
+//   output is not watched, kMonWatch_c = 0: a unit quaternion's largest component);
 // an output that alarms restarts its three statistics at 0. The numbers (mean, std, h, L, k,
-// lam) are the model file's `monitor` section, in generated/model.hpp when
+// lam, watch) are the model file's `monitor` section, in generated/model.hpp when
 // CDAM_MODEL_HAS_MONITOR is 1. Fixed sizes, no heap, no libm.
 //
 // Alarm frame (kAlarmId = 0x3F2, standard id, 8 bytes, little-endian; not a C610 id (0x1FF,
@@ -59,6 +60,7 @@ class Monitor {
       if (up_[c] > kMonH[c]) f |= kCusumUp;
       if (dn_[c] > kMonH[c]) f |= kCusumDown;
       if (ae > kMonEwmaLimit[c]) f |= kEwma;
+      if (kMonWatch[c] == 0.0f) f = 0;   // an output the monitor does not watch
       flags[c] = f;
       if (f) {
         e_[c] = up_[c] = dn_[c] = 0.0f;
@@ -76,13 +78,15 @@ class Monitor {
   std::uint16_t count_ = 0;
 };
 
-// FNV-1a of the monitor's numbers: mean, std, h, L, then k and lam (cdam_core.firmware.step)
+// FNV-1a of the monitor's numbers: mean, std, h, L, watch, then k and lam
+// (cdam_core.firmware.step)
 inline std::uint32_t monitor_fnv1a() {
   using namespace cdam_model;
   std::uint32_t h = fnv1a_floats(0x811C9DC5u, kMonMean, sizeof(kMonMean) / 4);
   h = fnv1a_floats(h, kMonStd, sizeof(kMonStd) / 4);
   h = fnv1a_floats(h, kMonH, sizeof(kMonH) / 4);
   h = fnv1a_floats(h, kMonEwmaLimit, sizeof(kMonEwmaLimit) / 4);
+  h = fnv1a_floats(h, kMonWatch, sizeof(kMonWatch) / 4);
   const float kl[2] = {kMonK, kMonLambda};
   return fnv1a_floats(h, kl, 2);
 }

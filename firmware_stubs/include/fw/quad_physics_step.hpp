@@ -8,10 +8,12 @@
 // (w' = 0 with the rates held), the quaternion normalised before the step and after it.
 // Every number comes from generated/model.hpp; float32 in the order of the Python float64
 // expressions (the image is built with -ffp-contract=off). Fixed sizes, no heap; sqrtf only.
+// The rigid body, the input ring and RK4 are fw/quad_body.hpp's (shared with quad_hybrid).
 #pragma once
 #include <cmath>
 #include <cstdint>
 
+#include "fw/quad_body.hpp"
 #include "model.hpp"
 
 #ifndef CDAM_FW_STEP_MODEL_HPP
@@ -22,7 +24,7 @@ namespace fw {
 
 class StepModel {
  public:
-  static constexpr int kS = 13;
+  static constexpr int kS = quad::kS;
   static constexpr int kK = cdam_model::kKernel;       // lag kernel taps (1 without a lag)
   static constexpr int kDT = cdam_model::kDelayTrans;  // input delay of the thrust (samples)
   static constexpr int kDR = cdam_model::kDelayRot;    // input delay of the torques
@@ -32,33 +34,44 @@ class StepModel {
   static_assert(kRing <= cdam_model::kHistory, "the history holds every input row the step uses");
 
   void prime(const float* u, const float* y) {
-    push_input(u);
+    ring_.push(u);
     for (int i = 0; i < kS; ++i) x_[i] = y[i];
   }
 
   void step(const float* u, float* y) {
-    normalise(x_);
+    quad::normalise(x_);
     float f[4];
-    drive(kDT, f);
+    ring_.drive(kDT, f);
     const float thrust = cdam_model::kTrans[0] * (((f[0] + f[1]) + f[2]) + f[3]);
     float acc[3] = {0.0f, 0.0f, 0.0f};
     if (cdam_model::kRatesDynamic) {
-      drive(kDR, f);
-      const float tau[3] = {((-f[0] - f[1]) + f[2]) + f[3], ((-f[0] + f[1]) + f[2]) - f[3],
-                            ((-f[0] + f[1]) - f[2]) + f[3]};
+      ring_.drive(kDR, f);
+      float tau[3];
+      quad::torque_combinations(f, tau);
       for (int j = 0; j < 3; ++j) acc[j] = cdam_model::kRot[j] * tau[j] + cdam_model::kRot[6 + j];
       if (cdam_model::kReaction) {
-        const float* a = input(kDR);
-        const float* b = input(kDR + 1);
+        const float* a = ring_.input(kDR);
+        const float* b = ring_.input(kDR + 1);
         // (U[t-d] - U[t-d-1]) @ (-1, 1, -1, 1) / dt
         const float yaw = ((((a[0] - b[0]) * -1.0f) + (a[1] - b[1])) + ((a[2] - b[2]) * -1.0f)
                            + (a[3] - b[3])) / cdam_model::kDt;
         acc[2] = acc[2] + cdam_model::kRot[12] * yaw;
       }
     }
-    rk4(thrust, acc);
+    // w' = torque acceleration + c o (wy wz, wx wz, wx wy) - k o w (0 with the rates held)
+    quad::rk4(x_, thrust, [&acc](const float* x, float* dx) {
+      if (cdam_model::kRatesDynamic) {
+        const float wx = x[10], wy = x[11], wz = x[12];
+        const float g[3] = {wy * wz, wx * wz, wx * wy};
+        const float w[3] = {wx, wy, wz};
+        for (int j = 0; j < 3; ++j)
+          dx[10 + j] = (acc[j] + cdam_model::kRot[3 + j] * g[j]) - cdam_model::kRot[9 + j] * w[j];
+      } else {
+        for (int j = 0; j < 3; ++j) dx[10 + j] = 0.0f;
+      }
+    });
     for (int i = 0; i < kS; ++i) y[i] = x_[i];
-    push_input(u);
+    ring_.push(u);
   }
 
   void correct(const float* y) {
@@ -66,77 +79,8 @@ class StepModel {
   }
 
  private:
-  static void normalise(float* x) {
-    const float n = std::sqrt(((x[6] * x[6] + x[7] * x[7]) + x[8] * x[8]) + x[9] * x[9]);
-    for (int i = 6; i < 10; ++i) x[i] = x[i] / n;
-  }
-
-  // f_i = sum_j kKernel[j] u_i(t-1-d-j)^2, the newest input row being u(t-1)
-  void drive(int d, float* f) const {
-    for (int i = 0; i < 4; ++i) f[i] = 0.0f;
-    for (int j = 0; j < kK; ++j) {
-      const float* r = input(d + j);
-      for (int i = 0; i < 4; ++i) f[i] = f[i] + cdam_model::kKernelW[j] * (r[i] * r[i]);
-    }
-  }
-
-  static void derivative(const float* x, float thrust, const float* acc, float* dx) {
-    const float* v = x + 3;
-    const float qx = x[6], qy = x[7], qz = x[8], qw = x[9];
-    const float wx = x[10], wy = x[11], wz = x[12];
-    const float n[3] = {2.0f * (qx * qz + qw * qy), 2.0f * (qy * qz - qw * qx),
-                        1.0f - 2.0f * (qx * qx + qy * qy)};
-    const float dxy = cdam_model::kTrans[1], dz = cdam_model::kTrans[2];
-    const float nv = (n[0] * v[0] + n[1] * v[1]) + n[2] * v[2];
-    for (int i = 0; i < 3; ++i) {
-      dx[i] = v[i];
-      dx[3 + i] = (thrust * n[i] - dxy * v[i]) - ((dz - dxy) * n[i]) * nv;
-    }
-    dx[5] = dx[5] - cdam_model::kGravity;
-    dx[6] = 0.5f * (qw * wx + (qy * wz - qz * wy));
-    dx[7] = 0.5f * (qw * wy + (qz * wx - qx * wz));
-    dx[8] = 0.5f * (qw * wz + (qx * wy - qy * wx));
-    dx[9] = -0.5f * ((qx * wx + qy * wy) + qz * wz);
-    if (cdam_model::kRatesDynamic) {
-      const float g[3] = {wy * wz, wx * wz, wx * wy};
-      const float w[3] = {wx, wy, wz};
-      for (int j = 0; j < 3; ++j)
-        dx[10 + j] = (acc[j] + cdam_model::kRot[3 + j] * g[j]) - cdam_model::kRot[9 + j] * w[j];
-    } else {
-      for (int j = 0; j < 3; ++j) dx[10 + j] = 0.0f;
-    }
-  }
-
-  void rk4(float thrust, const float* acc) {
-    constexpr float half = 0.5f * cdam_model::kDt;   // 0.5 * dt (float32 of the float64 product)
-    constexpr float sixth = cdam_model::kDt6;        // dt / 6
-    float k1[kS], k2[kS], k3[kS], k4[kS], tmp[kS];
-    derivative(x_, thrust, acc, k1);
-    for (int i = 0; i < kS; ++i) tmp[i] = x_[i] + half * k1[i];
-    derivative(tmp, thrust, acc, k2);
-    for (int i = 0; i < kS; ++i) tmp[i] = x_[i] + half * k2[i];
-    derivative(tmp, thrust, acc, k3);
-    for (int i = 0; i < kS; ++i) tmp[i] = x_[i] + cdam_model::kDt * k3[i];
-    derivative(tmp, thrust, acc, k4);
-    for (int i = 0; i < kS; ++i)
-      x_[i] = x_[i] + sixth * (((k1[i] + 2.0f * k2[i]) + 2.0f * k3[i]) + k4[i]);
-    normalise(x_);
-  }
-
-  // the input rows, a ring of kRing rows with `head_` the newest (u(t-1) during step)
-  void push_input(const float* u) {
-    head_ = head_ + 1 < kRing ? head_ + 1 : 0;
-    for (int c = 0; c < 4; ++c) u_[head_][c] = u[c];
-  }
-
-  const float* input(int back) const {
-    const int k = head_ - back;
-    return u_[k < 0 ? k + kRing : k];
-  }
-
   float x_[kS] = {};
-  float u_[kRing][4] = {};
-  int head_ = 0;
+  quad::InputRing<kRing> ring_;
 };
 
 inline std::uint32_t params_fnv1a() {

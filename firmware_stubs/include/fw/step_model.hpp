@@ -1,7 +1,8 @@
 // The dynamic model kinds on the target, one sample at a time: `arx`, `hybrid` (ARX + a static
 // network on its residual), `greybox` (a declared model plus the effects the residual loop
 // found, integrated as cdam_core.models.greybox.augmented.GreyBox does), `quad_physics` (the
-// flight model's rigid body, RK4 per sample: fw/quad_physics_step.hpp) and, kind 5, a
+// flight model's rigid body, RK4 per sample: fw/quad_physics_step.hpp), `quad_hybrid` (kind 6,
+// the physics with a recurrent network on the body rates: fw/quad_hybrid_step.hpp) and, kind 5, a
 // `bp_network` whose model file has a monitor section (NARX or static, beside its monitor). The numbers come from
 // generated/model.hpp (`cdam export-firmware`); the structure (which effect, which declared
 // model) is an integer code there, never a name. Fixed sizes, no heap; libm only for tanhf (a
@@ -554,4 +555,6 @@ inline std::uint32_t params_fnv1a() {
 
 #if CDAM_MODEL_KIND == 4
 #include "fw/quad_physics_step.hpp"   // the quad_physics flight model: RK4 on 13 states
+#elif CDAM_MODEL_KIND == 6
+#include "fw/quad_hybrid_step.hpp"    // quad_hybrid: the physics + a recurrent rate network
 #endif

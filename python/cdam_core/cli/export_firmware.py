@@ -11,8 +11,10 @@ def register(subparsers) -> None:
                     "hybrid (ARX coefficients, the residual network), greybox (the declared "
                     "model's parameters and the effects found, as codes and numbers; "
                     "fw/step_model.hpp), quad_physics (the flight model's parameters, lag "
-                    "kernel and delays; fw/quad_physics_step.hpp). Only numbers reach the header, never a name or text "
-                    "from the file.")
+                    "kernel and delays; fw/quad_physics_step.hpp), quad_hybrid (the "
+                    "physics with its rate network's weights and scales; "
+                    "fw/quad_hybrid_step.hpp). Only numbers reach the header, never a name or "
+                    "text from the file.")
     p.add_argument("model", metavar="MODEL", help="model file (.json)")
     p.add_argument("-o", "--output", required=True, help="header to write (model.hpp)")
     p.set_defaults(func=run)

@@ -14,7 +14,8 @@ def register(subparsers) -> None:
     sub = p.add_subparsers(dest="firmware_command", metavar="ACTION")
     c = sub.add_parser("check", help="build for MODEL, run the equivalence and cost checks",
                        description="Cross-builds firmware_stubs/ for MODEL (any kind: "
-                                   "bp_network, arx, hybrid, greybox, quad_physics) with arm-none-eabi-gcc, "
+                                   "bp_network, arx, hybrid, greybox, quad_physics, "
+                                   "quad_hybrid) with arm-none-eabi-gcc, "
                                    "runs it on qemu-system-arm -M netduinoplus2 and prints the "
                                    "kind, flash_bytes, static_ram_bytes, heap_free, "
                                    "instructions per inference (network: 1,000 input vectors) "
@@ -27,7 +28,8 @@ def register(subparsers) -> None:
                                    "one is named, with exit code 3.")
     c.add_argument("model", metavar="MODEL", help="model file (.json)")
     c.add_argument("--data", default=None, metavar="RECORD",
-                   help="arx, hybrid, greybox, quad_physics: check on this record (dataset CSV with the "
+                   help="arx, hybrid, greybox, quad_physics, quad_hybrid: check on this record "
+                        "(dataset CSV with the "
                         "model's input and output columns) instead of the synthetic one")
     c.add_argument("--horizon", type=int, default=10, metavar="K",
                    help="the dynamic kinds: k-step horizon compared besides one-step and free "
@@ -104,7 +106,7 @@ def _record(path, fm):
     ds = read_dataset(path, inputs=fm.inputs, outputs=fm.outputs)
     if len(ds) <= fm.history:
         raise CliError(f"--data: {len(ds)} rows; the model needs more than {fm.history}")
-    if fm.kind in ("greybox", "quad_physics"):
+    if fm.kind in ("greybox", "quad_physics", "quad_hybrid"):
         dt = float(np.median(np.diff(ds.t)))
         if not np.isclose(dt, fm.floats["kDt"], rtol=1e-6, atol=0.0):
             raise CliError(f"--data: sampled every {dt:g} s; the model integrates at "

@@ -73,7 +73,9 @@ def run(args) -> int:
         for c, name in enumerate(mf.outputs):
             print(f"{name}: residual mean {sec['mean'][c]:.4g} std {sec['std'][c]:.4g}, "
                   f"AR({sec['ar_order'][c]}), CUSUM h {sec['h'][c]:.4g} (k {sec['k']}), "
-                  f"EWMA limit {sec['ewma_limit'][c]:.4g} (lambda {sec['lambda']:.4g})")
+                  f"EWMA limit {sec['ewma_limit'][c]:.4g} (lambda {sec['lambda']:.4g})"
+                  + ("" if sec["watched"][c] else "; not watched (a unit quaternion's "
+                                                    "largest component)"))
         print(f"-> {args.calibrate}")
         return 0
     if mf.monitor is None:

@@ -27,6 +27,14 @@ Settings (:func:`calibrate`), none tuned to a record:
     alarms within WINDOW_S of in-control data is at most FALSE_ALARM_PROB (Bonferroni), so
     the in-control average run length is far above WINDOW_S (about WINDOW_S /
     -ln(1 - FALSE_ALARM_PROB) = 20 WINDOW_S for a geometric run length).
+  - a unit quaternion among the outputs (a model's ``unit_quaternion``: the flight kinds'
+    qx, qy, qz, qw) has three degrees of freedom, not four: |q| = 1 gives q . dq = 0 to first
+    order, so the residual of its largest component q_k (over the training record; qw near
+    hover) is -(sum_{i != k} q_i dq_i) / q_k, a combination of the other three, second order
+    in the attitude error where q_k is near 1 and with a spread that follows the attitude
+    (not the model's error): a heavy-tailed, heteroscedastic channel no stationary threshold
+    fits. That component is not watched (``watched`` 0: its thresholds are set as for any
+    output, but it never alarms); the three others carry the attitude's residual to first order.
   Simulation, not Siegmund's approximation: the one-step residual of a 1 kHz record is
   strongly autocorrelated (a smoothed record, a model error that varies slowly), and
   Siegmund's formula assumes independent samples; with an AR(1) coefficient of 0.9 it would
@@ -40,7 +48,7 @@ import numpy as np
 
 from cdam_core.base.checks import as_2d, same_rows
 
-__all__ = ["calibrate", "run_monitor", "one_step_residuals", "MonitorResult", "K", "TAU_S",
+__all__ = ["calibrate", "run_monitor", "watched_channels", "one_step_residuals", "MonitorResult", "K", "TAU_S",
            "WINDOW_S", "FALSE_ALARM_PROB", "MONITOR_VERSION", "CUSUM_UP", "CUSUM_DOWN", "EWMA"]
 
 MONITOR_VERSION = 1
@@ -142,6 +150,7 @@ def calibrate(model, U, Y, dt: float, segments=None, *, paths: int = 1000, seed:
         raise ValueError(f"U, Y: {R.shape[0]} rows with a one-step prediction; the residual "
                          f"statistics need at least 200")
     mean, std = R.mean(axis=0), R.std(axis=0, ddof=1)
+    watched = _watched(model, np.asarray(Y, np.float64)[valid], R.shape[1])
     if np.any(~(std > 0)):
         c = int(np.argmin(std))
         raise ValueError(f"Y: output {c} has a constant one-step residual; nothing to monitor")
@@ -159,7 +168,26 @@ def calibrate(model, U, Y, dt: float, segments=None, *, paths: int = 1000, seed:
     return {"version": MONITOR_VERSION, "mean": mean.tolist(), "std": std.tolist(), "k": K,
             "lambda": float(lam), "h": h, "ewma_limit": L, "dt": dt, "window_s": float(window_s),
             "false_alarm_prob": float(false_alarm_prob), "ar_order": orders, "paths": int(paths),
-            "seed": int(seed), "training_rows": int(R.shape[0])}
+            "seed": int(seed), "training_rows": int(R.shape[0]),
+            "watched": [int(w) for w in watched]}
+
+
+def _watched(model, Y, m: int) -> np.ndarray:
+    """Which outputs the monitor watches: all but the largest component (mean |q_i| over the
+    training rows Y) of a unit quaternion the model declares (module doc)."""
+    watched = np.ones(m, bool)
+    quat = getattr(model, "unit_quaternion", None)
+    if quat is not None:
+        quat = list(quat)
+        watched[quat[int(np.argmax(np.mean(np.abs(Y[:, quat]), axis=0)))]] = False
+    return watched
+
+
+def watched_channels(section: dict) -> np.ndarray:
+    """The ``watched`` flags of a monitor section (all outputs when it has none: version 1
+    files before the field)."""
+    w = section.get("watched")
+    return np.ones(len(section["mean"]), bool) if w is None else np.asarray(w, bool)
 
 
 @dataclass
@@ -179,7 +207,7 @@ class MonitorResult:
 
 def run_monitor(section: dict, R, valid=None, starts=(0,)) -> MonitorResult:
     """Run the monitor of a ``monitor`` section on residuals R (N, m) (float32 arithmetic as on
-    the target). The state restarts at 0 at each row of ``starts`` (segment starts) and, per
+    the target); an output not ``watched`` never alarms. The state restarts at 0 at each row of ``starts`` (segment starts) and, per
     channel, after each alarm; rows not ``valid`` are skipped."""
     R = np.asarray(R)
     if R.ndim != 2 or R.shape[1] != len(section["mean"]):
@@ -190,6 +218,7 @@ def run_monitor(section: dict, R, valid=None, starts=(0,)) -> MonitorResult:
     f32 = np.float32
     mean = np.asarray(section["mean"], f32)
     std = np.asarray(section["std"], f32)
+    watched = watched_channels(section)
     h = np.asarray(section["h"], f32)
     L = np.asarray(section["ewma_limit"], f32)
     k, lam, zero = f32(section["k"]), f32(section["lambda"]), f32(0)
@@ -211,8 +240,8 @@ def run_monitor(section: dict, R, valid=None, starts=(0,)) -> MonitorResult:
             up = np.maximum((up + z) - k, zero)
             dn = np.maximum((dn - z) - k, zero)
             out["z"][t], out["ewma"][t], out["up"][t], out["down"][t] = z, e, up, dn
-            fl = ((up > h) * CUSUM_UP + (dn > h) * CUSUM_DOWN
-                  + (np.abs(e) > L) * EWMA).astype(np.uint8)
+            fl = (((up > h) * CUSUM_UP + (dn > h) * CUSUM_DOWN
+                   + (np.abs(e) > L) * EWMA) * watched).astype(np.uint8)
             if fl.any():
                 flags[t] = fl
                 for c in np.flatnonzero(fl):

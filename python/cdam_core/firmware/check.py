@@ -25,7 +25,7 @@ def _input_range(fm: StepFirmwareModel):
     """(lo, hi) per input of the synthetic record, from the model's own numbers."""
     i, a = fm.ints, fm.arrays
     n = fm.n_inputs
-    if fm.kind == "quad_physics":
+    if fm.kind in ("quad_physics", "quad_hybrid"):
         # rotor speeds within 1 % of the hover speed sqrt(g / (4 kT/m)) (the model's own kT/m)
         hover = np.sqrt(fm.floats["kGravity"] / (4.0 * abs(float(a["kTrans"][0]))))
         return np.full(n, 0.99 * hover), np.full(n, 1.01 * hover)
@@ -64,14 +64,14 @@ def default_record(fm: StepFirmwareModel, n: int = 1000, seed: int = 0):
     """A synthetic record for a dynamic model: inputs that hold a uniform random level (shared
     generator, ``seed``) for HOLD_ROWS rows, in the range :func:`_input_range` gives; outputs:
     the Python model's free run from zero (so one-step and free run see the model's own
-    trajectory; quad_physics: from its training mean position and attitude, at rest).
+    trajectory; quad_physics, quad_hybrid: from its training mean position and attitude, at rest).
     Returns (U (n, I), Y (n, m)) float64."""
     lo, hi = _input_range(fm)
     levels = Rng(seed).uniform_array((n // HOLD_ROWS + 1) * fm.n_inputs, 0.0, 1.0)
     levels = levels.reshape(-1, fm.n_inputs)
     U = np.repeat(lo + (hi - lo) * levels, HOLD_ROWS, axis=0)[:n]
     Y = np.zeros((n, fm.n_outputs))
-    if fm.kind == "quad_physics":
+    if fm.kind in ("quad_physics", "quad_hybrid"):
         start = np.asarray(fm.model.y_start_, np.float64).copy()
         start[3:6] = start[10:13] = 0.0
         Y[:] = start

@@ -49,7 +49,7 @@ def export_header(model, out) -> Path:
     FirmwareModel or a StepFirmwareModel) to ``out``; returns the path. Numbers are float32
     with nine significant digits (exact round trip). ``CDAM_MODEL_KIND`` says the kind
     (0 bp_network, 1 arx, 2 hybrid, 3 greybox, 4 quad_physics, 5 a bp_network with a monitor
-    section; the firmware's CMake reads it)."""
+    section, 6 quad_hybrid; the firmware's CMake reads it)."""
     fm = model if isinstance(model, (FirmwareModel, StepFirmwareModel)) \
         else load_firmware_model(model)
     out = Path(out)

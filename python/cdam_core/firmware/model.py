@@ -70,7 +70,7 @@ def _minmax(X, lo, hi):
 
 def load_firmware_model(path) -> FirmwareModel | StepFirmwareModel:
     """Read a model file into what the firmware runs: a FirmwareModel for ``bp_network``, a
-    StepFirmwareModel for ``arx``, ``hybrid``, ``greybox``, ``quad_physics`` and a
+    StepFirmwareModel for ``arx``, ``hybrid``, ``greybox``, ``quad_physics``, ``quad_hybrid`` and a
     ``bp_network`` with a monitor section (run one sample at a time beside its monitor).
 
     Raises FileNotFoundError for a missing file and ValueError for a corrupt or inconsistent

@@ -19,9 +19,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from cdam_core.base.orders import parse_orders
+from cdam_core.evaluate.monitor import watched_channels
 from cdam_core.firmware.numbers import c_array, c_float, c_int_array, finite32, theta_fnv1a
 
-KIND_CODES = {"bp_network": 0, "arx": 1, "hybrid": 2, "greybox": 3, "quad_physics": 4}
+KIND_CODES = {"bp_network": 0, "arx": 1, "hybrid": 2, "greybox": 3, "quad_physics": 4,
+              "quad_hybrid": 6}
 DECLARED_CODES = {"rigid_axis": 0, "flexible_joint": 1, "quadrotor": 2, "aerial_manipulator": 3}
 EFFECT_CODES = {"coulomb_friction": 1, "asymmetric_friction": 2, "external_force": 3,
                 "actuator_delay": 4, "backlash": 5, "hardening_stiffness": 6, "payload_mass": 7,
@@ -93,6 +95,11 @@ class StepFirmwareModel:
             return (f"quad_physics, 13 states, rates {'dynamic' if i['kRatesDynamic'] else 'held'}"
                     f", {i['kKernel']}-tap actuation lag, delays {i['kDelayTrans']}/"
                     f"{i['kDelayRot']} samples, one RK4 step per sample")
+        if self.kind == "quad_hybrid":
+            return (f"quad_hybrid, 13 states, physics prior "
+                    f"{'dynamic' if i['kPriorDynamic'] else 'hold'} + {i['kNetInputs']}-"
+                    f"{i['kNetHidden']}-3 tanh network on the rates ({i['kLags']} rotor lags), "
+                    f"delays {i['kDelayTrans']}/{i['kDelayRot']} samples, one RK4 step per sample")
         return (f"greybox, {self.model.declared}, {i['kEffects']} effect(s), "
                 f"{i['kSubsteps']} substep(s) per sample")
 
@@ -126,6 +133,8 @@ def step_model(mf, source: str = "") -> StepFirmwareModel:
         fm = _greybox(mf)
     elif mf.kind == "quad_physics":
         fm = _quad_physics(mf)
+    elif mf.kind == "quad_hybrid":
+        fm = _quad_hybrid(mf)
     elif mf.kind == "bp_network":
         fm = _network(mf)
     else:
@@ -139,7 +148,7 @@ def step_model(mf, source: str = "") -> StepFirmwareModel:
     return fm
 
 
-MONITOR_ARRAYS = ("kMonMean", "kMonStd", "kMonH", "kMonEwmaLimit")
+MONITOR_ARRAYS = ("kMonMean", "kMonStd", "kMonH", "kMonEwmaLimit", "kMonWatch")
 
 
 def _monitor(fm: StepFirmwareModel, mf) -> None:
@@ -152,6 +161,9 @@ def _monitor(fm: StepFirmwareModel, mf) -> None:
     fm.floats.update({"kMonK": float(sec["k"]), "kMonLambda": float(sec["lambda"])})
     for name, key in zip(MONITOR_ARRAYS, ("mean", "std", "h", "ewma_limit")):
         fm.arrays[name] = np.asarray(sec[key], np.float64)
+    # 1 for a watched output, 0 for one that never alarms (evaluate.monitor: a unit
+    # quaternion's largest component); all 1 for a section without the field
+    fm.arrays["kMonWatch"] = watched_channels(sec).astype(np.float64)
 
 
 def _arx(mf) -> StepFirmwareModel:
@@ -357,4 +369,53 @@ def _quad_physics(mf) -> StepFirmwareModel:
         hashed=("kTrans", "kRot", "kKernelW"))
     fm.arrays = {"kTrans": np.asarray(m.trans_, np.float64),
                  "kRot": np.asarray(m.rot_, np.float64), "kKernelW": kernel}
+    return fm
+
+
+# the quad_hybrid model section's fields this step knows (any other is refused by name)
+QUAD_HYBRID_FIELDS = {"dt", "hidden", "horizon", "lags", "prior", "epochs", "stride", "seed",
+                      "weighting", "physics", "theta", "in_mean", "in_scale", "out_scale",
+                      "err_scale", "feature_scale"}
+MAX_LAGS = 100            # rotor-speed lags of the network on the target (1 s at 100 Hz)
+
+
+def _quad_hybrid(mf) -> StepFirmwareModel:
+    """The quad_hybrid flight model (fw/quad_hybrid_step.hpp): the physics' translational
+    parameters, lag kernel and delays, its rate increment's b and e, the network's weights and
+    its scales. Training settings (horizon, epochs, stride, seed, weighting, err_scale) do not
+    act on the prediction and stay out of the header."""
+    m = mf.model
+    p = m.physics_
+    unknown = sorted(set(m.to_dict()) - QUAD_HYBRID_FIELDS) or \
+        [f"physics.{k}" for k in sorted(set(p.to_dict()) - QUAD_PHYSICS_FIELDS)]
+    if unknown:
+        raise ValueError(f"MODEL: model.{unknown[0]}: a quad_hybrid option the firmware does "
+                         f"not run yet")
+    lags, H = int(m.lags), int(m.hidden)
+    if not 1 <= lags <= MAX_LAGS:
+        raise ValueError(f"MODEL: model.lags: {lags} is outside 1..{MAX_LAGS} on the firmware")
+    theta = np.asarray(m.theta_, np.float64)
+    n_in = 3 + 3 * lags
+    if theta.shape != (n_in * H + H + 3 * H + 3,) or theta.size > MAX_COEFS:
+        raise ValueError(f"MODEL: model.theta: {theta.size} weights do not fit a {n_in}-{H}-3 "
+                         f"network on the firmware (at most {MAX_COEFS})")
+    kernel = np.asarray(p._kernel(), np.float64)
+    dT, dR = (int(d) for d in p.delays_)
+    dt = float(m.dt)
+    dynamic = m.prior == "dynamic"
+    fm = StepFirmwareModel(
+        "quad_hybrid", m, list(mf.inputs), list(mf.outputs), int(m.t0), mf.sha256,
+        ints={"kKind": KIND_CODES["quad_hybrid"], "kInputs": 4, "kOutputs": 13,
+              "kHistory": int(m.t0), "kKernel": int(kernel.size), "kDelayTrans": dT,
+              "kDelayRot": dR, "kLags": lags, "kNetInputs": n_in, "kNetHidden": H,
+              "kPriorDynamic": dynamic},
+        floats={"kDt": dt, "kDt6": dt / 6.0, "kGravity": float(p.gravity)},
+        macros={"CDAM_MODEL_KIND": KIND_CODES["quad_hybrid"]},
+        hashed=("kTrans", "kKernelW", "kDrift", "kNetScale", "kNetTheta"))
+    rot = np.asarray(p.rot_, np.float64)
+    fm.arrays = {"kTrans": np.asarray(p.trans_, np.float64), "kKernelW": kernel,
+                 # the physics' rate increment dt (b o tau + e): b, then e
+                 "kDrift": np.r_[rot[0:3], rot[6:9]],
+                 "kNetScale": np.r_[m.in_mean_, m.in_scale_, m.out_scale_, m.feature_scale_],
+                 "kNetTheta": theta}
     return fm

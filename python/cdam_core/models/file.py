@@ -126,7 +126,8 @@ def _check_monitor(doc: dict, n_outputs: int) -> None:
     mon = doc.get("monitor")
     if mon is None:
         return
-    for name in ("mean", "std", "h", "ewma_limit", "ar_order"):
+    for name in ("mean", "std", "h", "ewma_limit", "ar_order") + \
+            (("watched",) if "watched" in mon else ()):
         if len(mon[name]) != n_outputs:
             raise ValueError(f"monitor.{name}: {len(mon[name])} values for {n_outputs} outputs")
 

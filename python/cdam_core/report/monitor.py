@@ -38,10 +38,13 @@ def write_monitor_report(folder, t, outputs: list[str], result, section: dict, a
               "of its output.", "",
               "| output | residual mean | residual std | CUSUM threshold h [std] | "
               "EWMA limit [std] | alarms | first alarm [s] |", "|---|---|---|---|---|---|---|"]
+    watched = section.get("watched") or [1] * len(outputs)   # absent: every output
     for c, name in enumerate(outputs):
         u = units.get(name, "output units")
         mine = [a["t"] for a in alarms if a["output"] == name]
         first = f"{mine[0]:.4f}" if mine else "-"
+        if not watched[c]:
+            first = "not watched"
         lines.append(f"| {name} | {section['mean'][c]:.4g} {u} | {section['std'][c]:.4g} {u} | "
                      f"{section['h'][c]:.4g} | {section['ewma_limit'][c]:.4g} | {len(mine)} | "
                      f"{first} |")

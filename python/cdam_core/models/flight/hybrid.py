@@ -70,6 +70,7 @@ class QuadHybrid(Model):
     """
 
     kind = "quad_hybrid"
+    unit_quaternion = (6, 7, 8, 9)   # qx, qy, qz, qw among the outputs (evaluate.monitor)
     fits_segments = True
 
     def __init__(self, dt: float = 0.01, hidden: int = 8, horizon: int = 50, lags: int = 6,

@@ -176,6 +176,7 @@ class QuadPhysics(Model):
     """
 
     kind = "quad_physics"
+    unit_quaternion = (6, 7, 8, 9)   # qx, qy, qz, qw among the outputs (evaluate.monitor)
     fits_segments = True
 
     def __init__(self, dt: float = 0.01, rates: str = "dynamic", drag: bool = True,
