@@ -134,9 +134,9 @@ def _write(out, folds, choices, md, fixed) -> int:
     extra = {}
     if PAPERNETS.exists() and len(folds) == len(TYPES):
         js = json.loads(PAPERNETS.read_text())["mean"]
-        order = [list(js["groups"]).index(g.name) for g in mean.groups]
-        nets = {k: np.asarray(v)[:, order] for k, v in js["group_rmse"].items()
-                if k.endswith(("_static", "_narx", "_chosen"))}
+        nets = {k: np.stack([np.asarray(v[g.name]) for g in mean.groups], axis=1)
+                for k, v in js["group_rmse"].items()
+                if k.endswith(("_static", "_narx", "_chosen"))}   # {group: curve} per net
         if nets:
             extra["paper networks (best of each h)"] = np.min(np.stack(list(nets.values())), 0)
     body = [rmse_table(mean), "", "Horizons (of 1..50) where anchored is below:", "",
