@@ -9,13 +9,19 @@ from cdam_core import _core
 from cdam_core.models import ArxKStep, ArxModel
 
 
-def _plant(n, seed):
-    """y1' = 0.85 y1 + 0.1 y2 + 0.4 tanh(2 u1(t-1)); y2' = 0.8 y2 + 0.3 u2(t-1) - 0.3 y1 |y1|,
-    smooth random inputs, small output noise."""
+def _inputs(n, seed):
+    """(rng, U): two smooth random inputs (first-order filtered white noise)."""
     rng = np.random.default_rng(seed)
     U = np.zeros((n, 2))
     for t in range(1, n):
         U[t] = 0.9 * U[t - 1] + 0.3 * rng.normal(size=2)
+    return rng, U
+
+
+def _plant(n, seed):
+    """y1' = 0.85 y1 + 0.1 y2 + 0.4 tanh(2 u1(t-1)); y2' = 0.8 y2 + 0.3 u2(t-1) - 0.3 y1 |y1|,
+    smooth random inputs, small output noise."""
+    rng, U = _inputs(n, seed)
     Y = np.zeros((n, 2))
     for t in range(1, n):
         y1, y2 = Y[t - 1]
@@ -111,3 +117,43 @@ def test_bad_fit_input_is_named(kw, message):
     U, Y = _plant(600, 6)
     with pytest.raises(ValueError, match=message):
         ArxKStep((1, 1, 1), hidden=2, horizon=5, epochs=1, **kw).fit(U, Y)
+
+
+def _stack(parts):
+    """A record.stack.Stack of (U, Y) records laid end to end (outputs y0, y1)."""
+    from cdam_core.record.stack import Stack
+    U = np.vstack([u for u, _ in parts])
+    Y = np.vstack([y for _, y in parts])
+    n = [len(u) for u, _ in parts]
+    return Stack([f"r{k}" for k in range(len(parts))], ["u0", "u1"], ["y0", "y1"], U, Y,
+                 np.arange(len(U)) * 0.01, n, np.repeat(np.arange(len(parts)), n),
+                 np.concatenate([np.arange(k) for k in n]))
+
+
+def _linear(n, seed):
+    """y' = A y + B u(t-1) exactly (an ARX(1, 1, 1)), small output noise."""
+    rng, U = _inputs(n, seed)
+    Y = np.zeros((n, 2))
+    for t in range(1, n):
+        Y[t] = [[0.85, 0.1], [-0.2, 0.8]] @ Y[t - 1] + [0.4, 0.3] * U[t - 1]
+    return U, Y + 0.002 * rng.normal(size=Y.shape)
+
+
+@pytest.mark.parametrize("plant, kept", [(_plant, True), (_linear, False)])
+def test_anchored_fitter_keeps_the_network_only_where_validation_says_so(plant, kept):
+    from cdam_core.evaluate.crossfold import AnchoredFitter
+    fit_parts, valid_parts = [plant(1500, 11), plant(1500, 12)], [plant(1000, 13)]
+    fit, valid = _stack(fit_parts), _stack(valid_parts)
+    train = _stack(fit_parts + valid_parts)
+    fitter = AnchoredFitter(grid={"small": {"hidden": 4, "lags": 1, "horizon": 10}},
+                            fixed={"epochs": 8, "weighting": "base"},
+                            arx_grid=((1, 1, 1), (2, 1, 1)), groups=(), blind=())
+    model = fitter(train, fit, valid)
+    c = fitter.choices[-1]
+    if kept:
+        assert c["chosen"] == "small" and isinstance(model, ArxKStep)
+        assert list(model.arx_.orders) == c["arx_orders"]
+        assert c["validation"]["small"] < c["validation"]["arx"]
+        assert model.epochs == c["epochs"] >= 1 and model.n_outputs_ == 2
+    else:
+        assert c["chosen"] == "arx" and type(model) is ArxModel
