@@ -24,6 +24,17 @@ def _problem(seed=0, N=400, ns=3, ne=4, H=5, K=6, windows=None):
     return theta, (S, E, Dr, starts, K, H) + scales
 
 
+def _central_differences(theta, args, h=1e-6):
+    """-d e / d theta of the twin's residuals (e = (y - y_hat) / q, so J = -de/dtheta)."""
+    cols = []
+    for p in range(theta.size):
+        d = np.zeros(theta.size)
+        d[p] = h
+        cols.append(-(kstep_residuals(theta + d, *args) - kstep_residuals(theta - d, *args))
+                    / (2 * h))
+    return np.stack(cols, axis=1)
+
+
 @pytest.mark.parametrize("weighted", [False, True])
 def test_jacobian_equals_central_differences_and_the_numpy_twin(weighted):
     theta, args = _problem()
@@ -34,14 +45,7 @@ def test_jacobian_equals_central_differences_and_the_numpy_twin(weighted):
     assert J.shape == (5 * 6 * 3, theta.size)
     np.testing.assert_allclose(e, e2, rtol=0, atol=1e-13)
     np.testing.assert_allclose(J, J2, rtol=0, atol=1e-12 * np.abs(J2).max())
-    # central differences of the twin's residuals (e = (y - y_hat) / q: J = -de/dtheta)
-    h = 1e-6
-    Jfd = np.empty_like(J2)
-    for p in range(theta.size):
-        d = np.zeros(theta.size)
-        d[p] = h
-        Jfd[:, p] = -(kstep_residuals(theta + d, *args) - kstep_residuals(theta - d, *args)) \
-            / (2 * h)
+    Jfd = _central_differences(theta, args)
     np.testing.assert_allclose(J, Jfd, rtol=0, atol=1e-7 * np.abs(Jfd).max())
     # the recurrence matters: a later step depends on the network through the state
     assert np.abs(J[-3:]).max() > 2 * np.abs(J[:3]).max()
@@ -118,3 +122,87 @@ def test_parameter_count():
         _core.kstep_num_params(3, 4, 0)
     with pytest.raises(ValueError, match="states: must be in 1"):
         _core.kstep_num_params(-1, 4, 2)
+
+
+def _linear_problem(seed=5, N=500, ns=3, ne=2, H=4, K=7, na=2):
+    """A problem with a linear part of na lags, stable (spectral radius < 1 of the companion)."""
+    theta, args = _problem(seed=seed, N=N, ns=ns, ne=ne, H=H, K=K)
+    rng = np.random.default_rng(seed + 100)
+    A = [0.5 * np.eye(ns) + 0.1 * rng.normal(size=(ns, ns))] + \
+        [0.2 * rng.normal(size=(ns, ns)) for _ in range(na - 1)]
+    lin = np.hstack([A[0] - np.eye(ns)] + A[1:])
+    S, E, Dr = args[:3]
+    starts = np.array([na - 1, 10, 50, 200, N - 1 - K])
+    return theta, (S, E, Dr, starts) + args[4:] + (None, lin), A
+
+
+@pytest.mark.parametrize("na", [1, 3])
+def test_linear_part_jacobian_equals_differences_and_the_twin(na):
+    theta, args, _ = _linear_problem(na=na)
+    e, J = _core.kstep_jacobian(theta, *args)
+    e2, J2 = kstep_jacobian(theta, *args)
+    np.testing.assert_allclose(e, e2, rtol=0, atol=1e-12 * np.abs(e2).max())
+    np.testing.assert_allclose(J, J2, rtol=0, atol=1e-12 * np.abs(J2).max())
+    Jfd = _central_differences(theta, args)
+    np.testing.assert_allclose(J, Jfd, rtol=0, atol=1e-7 * np.abs(Jfd).max())
+    # J'J / J'e of the core against the twin's J, any thread count alike
+    jtj, jte, sse = _core.kstep_normal(theta, *args[:11], threads=1, lin=args[11])
+    np.testing.assert_allclose(jtj, J2.T @ J2, rtol=1e-11, atol=1e-11 * np.abs(J2.T @ J2).max())
+    np.testing.assert_allclose(jte, J2.T @ e2, rtol=1e-11, atol=1e-11 * np.abs(J2.T @ e2).max())
+    jtj3, jte3, sse3 = _core.kstep_normal(theta, *args[:11], threads=3, lin=args[11])
+    assert np.array_equal(jtj, jtj3) and np.array_equal(jte, jte3) and sse == sse3
+
+
+def test_linear_part_with_a_silent_network_is_the_linear_model():
+    # network output zero (W2 = b2 = 0): the rollout is the linear recursion
+    # s_{t+1} = sum_l A_l s_{t-l} + D_t, simulated here in plain numpy from the measured past
+    theta, args, A = _linear_problem(na=3)
+    S, E, Dr, starts, K, H = args[:6]
+    ns, ni = S.shape[1], S.shape[1] + E.shape[1]
+    theta = theta.copy()
+    theta[H * ni + H:] = 0.0
+    q = args[9]
+    e, _ = _core.kstep_jacobian(theta, *args)
+    e = e.reshape(len(starts), K, ns)
+    for w, a in enumerate(starts):
+        hist = [S[a - 2], S[a - 1], S[a]]
+        for j in range(K):
+            t = a + j
+            nxt = A[0] @ hist[-1] + A[1] @ hist[-2] + A[2] @ hist[-3] + Dr[t]
+            hist.append(nxt)
+            np.testing.assert_allclose(e[w, j], (S[t + 1] - nxt) / q, rtol=1e-12, atol=1e-12)
+
+
+def test_linear_part_bad_input_is_named():
+    theta, args, _ = _linear_problem(na=2)
+    S = args[0]
+    with pytest.raises(ValueError, match="lin: expected an"):
+        _core.kstep_jacobian(theta, *args[:11], lin=np.zeros((S.shape[1], 4)))
+    starts = np.array([0, 10])
+    with pytest.raises(ValueError, match=r"starts\[0\]: row 0 has not the 1 earlier rows"):
+        _core.kstep_jacobian(theta, *args[:3], starts, *args[4:])
+    with pytest.raises(ValueError, match="lin: contains NaN"):
+        _core.kstep_jacobian(theta, *args[:11], lin=np.full((S.shape[1], 6), np.nan))
+
+
+def test_per_step_error_scales_divide_the_unscaled_errors():
+    # err_scale (K, ns): each step's error of each state over its own scale; the unscaled
+    # errors (err_scale 1) divided here in numpy, the Jacobian against the twin
+    theta, args, _ = _linear_problem(na=2)
+    S, K = args[0], args[4]
+    ns = S.shape[1]
+    qk = np.random.default_rng(9).uniform(0.2, 3.0, (K, ns))
+    plain = args[:9] + (np.ones(ns), None, args[11])
+    e1, J1 = _core.kstep_jacobian(theta, *plain)
+    scaled = args[:9] + (qk, None, args[11])
+    e, J = _core.kstep_jacobian(theta, *scaled)
+    div = np.tile(qk.reshape(-1), len(args[3]))
+    np.testing.assert_allclose(e, e1 / div, rtol=1e-13, atol=0)
+    np.testing.assert_allclose(J, J1 / div[:, None], rtol=1e-13, atol=0)
+    e2, J2 = kstep_jacobian(theta, *scaled)
+    np.testing.assert_allclose(e, e2, rtol=0, atol=1e-12 * np.abs(e2).max())
+    np.testing.assert_allclose(J, J2, rtol=0, atol=1e-12 * np.abs(J2).max())
+    with pytest.raises(ValueError, match="step_weight: not with a per-step err_scale"):
+        _core.kstep_jacobian(theta, *args[:9], qk, np.ones(K), args[11])
+    with pytest.raises(ValueError, match="err_scale: expected 3 columns"):
+        _core.kstep_jacobian(theta, *args[:9], np.ones((K, ns + 1)), None, args[11])

@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from cdam_core.models import (ArxModel, BPNetwork, HybridNarx, QuadHybrid, QuadPhysics,
+from cdam_core.models import (ArxKStep, ArxModel, BPNetwork, HybridNarx, QuadHybrid, QuadPhysics,
                               load_model, read_model_file, save_model)
 from cdam_core.models.file import KINDS as FILE_KINDS
 from cdam_core.models.greybox.augmented import GreyBox
@@ -61,6 +61,9 @@ KINDS = {
     "quad_physics": lambda: (QuadPhysics(), _quad()),
     "quad_hybrid": lambda: (QuadHybrid(hidden=3, horizon=5, lags=2, epochs=3, stride=10),
                             _quad()),
+    "arx_kstep": lambda: (ArxKStep((2, 2, 1), hidden=3, horizon=5, lags=2, epochs=3, stride=10,
+                                   net_features="physics", blind=[0, 1, 2],
+                                   groups=[0, 0, 0, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3]), _quad()),
 }
 
 

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cdam_core.evaluate.baselines import ARX_GRID, select_arx
+from cdam_core.evaluate.baselines import ARX_GRID, relative_error, select_arx
 from cdam_core.evaluate.groups import NANODRONE_GROUPS
 from cdam_core.evaluate.horizons import HorizonScores, score_horizons
 from cdam_core.models.arx import ArxModel
@@ -35,6 +35,7 @@ from cdam_core.record.realdata.nanodrone import load_nanodrone, trajectory_type
 from cdam_core.record.stack import stack_records
 
 __all__ = ["Fold", "cross_trajectory_fold", "mean_over_folds", "physics_effects_fold",
+           "AnchoredFitter", "ANCHORED_GRID", "ANCHORED_FIXED", "ANCHORED_BLIND",
            "PHYSICS_VARIANTS", "TYPES"]
 
 TYPES = ("square", "random1", "random2", "multisine")
@@ -243,3 +244,93 @@ def hybrid_fold(files, test_type: str, grid=None, fixed=None, horizon: int = 50,
     return {"fold": fold, "chosen": chosen, "structure": {**fixed, **grid[chosen]},
             "validation": val, "fit_seconds": fit_seconds,
             "history": model.history_}
+
+
+#: the structures of the ARX-anchored k-step model (``models.arx_kstep.ArxKStep``) the anchored
+#: fitter chooses among on the validation flights (beside the ARX alone); the network does not
+#: see the position (``blind``: the dynamics do not depend on where the vehicle is); LM runs at
+#: most ``epochs`` epochs on the fit flights, the epoch of least validation k-step error is kept
+#: and the final fit on all training flights runs that many
+ANCHORED_GRID = {"h8_l2_K50": {"hidden": 8, "lags": 2, "horizon": 50}}
+ANCHORED_FIXED = {"epochs": 20, "net_features": "physics", "weighting": "base", "stride": 100}
+ANCHORED_BLIND = ("x", "y", "z")
+
+
+class AnchoredFitter:
+    """``fit(train, fit, valid)`` for ``cross_trajectory_fold(models=...)``: the ARX-anchored
+    k-step model, every choice on the validation flights of the training types.
+
+    The ARX's orders as the fold's baseline chooses them (``select_arx`` on the fit and
+    validation flights); each structure of ``grid`` (over ``fixed``) is trained on the fit
+    flights with those orders (error scales per group of ``groups``: the benchmark's position,
+    velocity, attitude, rates; the outputs ``blind`` hidden from the network), LM tracking the
+    validation flights' k-step error (the best epoch kept), and scored on the validation
+    flights by the mean over ``select_horizons`` and groups of its MAE over the naive MAE, as
+    is the ARX fitted on the fit flights; the least wins. The ARX winning, the model is the ARX
+    (``select_arx``'s, fitted on all training flights); else the chosen structure retrained on
+    all training flights for its best validation epoch count.
+    ``choices``: one record per call (orders, validation scores, chosen, epochs, fit seconds)."""
+
+    def __init__(self, grid=None, fixed=None, select_horizons=(1, 10, 25, 50),
+                 arx_grid=ARX_GRID, groups=NANODRONE_GROUPS, blind=ANCHORED_BLIND):
+        self.grid = dict(ANCHORED_GRID if grid is None else grid)
+        self.fixed = dict(ANCHORED_FIXED if fixed is None else fixed)
+        if not self.grid:
+            raise ValueError("grid: no structure given")
+        self.select_horizons = tuple(int(h) for h in select_horizons)
+        self.arx_grid = arx_grid
+        self.groups = list(groups)
+        self.blind = tuple(blind)
+        self.choices = []
+
+    def _labels(self, outputs):
+        lab = np.full(len(outputs), -1)
+        for g, group in enumerate(self.groups):
+            for c in group.columns:
+                lab[list(outputs).index(c)] = g
+        rest = lab < 0
+        lab[rest] = len(self.groups) + np.arange(int(rest.sum()))   # ungrouped: alone
+        return [int(v) for v in lab]
+
+    def __call__(self, train, fit, valid):
+        import time
+
+        from cdam_core.models.arx_kstep import ArxKStep
+
+        arx, orders, _ = select_arx(fit, valid, self.arx_grid, self.select_horizons,
+                                    self.groups)
+        common = {"narx": orders, "groups": self._labels(train.outputs),
+                  "blind": [list(train.outputs).index(c) for c in self.blind]}
+        base = ArxModel(orders).fit(fit.U, fit.Y, segments=fit.lengths)
+        val = {"arx": relative_error(base, valid, self.select_horizons, self.groups)}
+        epochs, hist = {}, {}
+        t = time.perf_counter()
+        for name, kw in self.grid.items():
+            m = ArxKStep(**common, **{**self.fixed, **kw})
+            try:
+                m.fit(fit.U, fit.Y, segments=fit.lengths,
+                      validation=(valid.U, valid.Y, valid.lengths))
+                val[name] = relative_error(m, valid, self.select_horizons, self.groups)
+                epochs[name], hist[name] = m.history_["best_epoch"], m.history_
+            except ValueError:             # a diverging candidate is no candidate
+                val[name] = float("inf")
+        select_seconds = time.perf_counter() - t
+        chosen = min(val, key=lambda k: (val[k], k != "arx", k))
+        if chosen != "arx" and not epochs[chosen]:
+            chosen = "arx"                 # no epoch lowered the validation error
+        t = time.perf_counter()
+        if chosen == "arx":
+            model = arx
+        else:
+            model = ArxKStep(**common, **{**self.fixed, **self.grid[chosen],
+                                          "epochs": epochs[chosen]})
+            model.fit(train.U, train.Y, segments=train.lengths)
+        self.choices.append({"arx_orders": list(orders), "validation": val, "chosen": chosen,
+                             "epochs": epochs.get(chosen), "structure": {} if chosen == "arx"
+                             else {**self.fixed, **self.grid[chosen],
+                                   "epochs": epochs[chosen]},
+                             "select_seconds": select_seconds,
+                             "fit_seconds": time.perf_counter() - t,
+                             "validation_history": hist,
+                             "history": getattr(model, "history_", None)})
+        return model

@@ -4,7 +4,7 @@ Layout (JSON; schema: ``model-file.schema.json`` beside this module, documented 
 docs/MODEL_FILE.md)::
 
     {"format": "cdam-model", "version": 2, "kind": "bp_network" | "arx" | "hybrid" | "greybox"
-                                          | "quad_physics" | "quad_hybrid",
+                                          | "quad_physics" | "quad_hybrid" | "arx_kstep",
      "inputs": [names], "outputs": [names], "preprocessing": {"smoothing_passes": int},
      "meta": {...free JSON...}, "model": {...the kind's section...},
      "monitor": {...optional: the residual monitor's statistics and thresholds...},
@@ -25,6 +25,7 @@ from pathlib import Path
 
 from cdam_core.base.jsonio import plain, write_text_atomic
 from cdam_core.models.arx import ArxModel
+from cdam_core.models.arx_kstep import ArxKStep
 from cdam_core.models.flight.hybrid import QuadHybrid
 from cdam_core.models.flight.physics import QuadPhysics
 from cdam_core.models.greybox.augmented import GreyBox
@@ -37,7 +38,7 @@ FORMAT = "cdam-model"
 VERSION = 2
 KINDS: dict[str, type] = {"bp_network": BPNetwork, "arx": ArxModel, "hybrid": HybridNarx,
                           "greybox": GreyBox, "quad_physics": QuadPhysics,
-                          "quad_hybrid": QuadHybrid}
+                          "quad_hybrid": QuadHybrid, "arx_kstep": ArxKStep}
 MAX_FILE_BYTES = 256 * 1024 * 1024
 
 __all__ = ["save_model", "load_model", "read_model_file", "ModelFile", "FORMAT", "VERSION",

@@ -6,6 +6,10 @@ Model (ns states s, ne exogenous inputs e, H tanh units; theta = [W1(:); b1; W2(
 column-major, W1 H x (ns + ne), W2 ns x H)::
 
     x_t = [(s_t - m) / c, e_t];   s_{t+1} = s_t + d_t + r * (W2 tanh(W1 x_t + b1) + b2)
+                                            + sum_l L_l s_{t-l}
+
+with the optional linear part L = [L_0 .. L_{na-1}] (``lin``, ns x na ns; a linear base model
+such as an ARX: L_0 = A_1 - I, L_l = A_{l+1}); states before a window's start are measured.
 
 Windows of K steps from the measured state at each start a; residual (S[a + j] - s_hat_j) / q,
 j = 1..K. Everything is vectorised over the windows; the Jacobian is carried forward as the
@@ -33,9 +37,11 @@ def _unpack(theta, ns, ni, H):
 
 
 def kstep_jacobian(theta, S, E, D, starts, K, hidden, in_mean, in_scale, out_scale, err_scale,
-                   step_weight=None, jacobian: bool = True):
+                   step_weight=None, lin=None, jacobian: bool = True):
     """(e, J) in the core's row order: row (w K + j) ns + i; the errors of step j + 1 times
-    ``step_weight[j]`` (None: 1); J None without ``jacobian``."""
+    ``step_weight[j]`` (None: 1), or ``err_scale`` (K, ns): one scale per step and state;
+    ``lin``: the linear part (None: none); J None without
+    ``jacobian``."""
     theta = np.asarray(theta, float)
     S, E, D = (np.asarray(a, float) for a in (S, E, D))
     starts = np.asarray(starts, int)
@@ -45,9 +51,15 @@ def kstep_jacobian(theta, S, E, D, starts, K, hidden, in_mean, in_scale, out_sca
     W1, b1, W2, b2 = _unpack(theta, ns, ni, H)
     m, c, r, q = (np.asarray(v, float) for v in (in_mean, in_scale, out_scale, err_scale))
     omega = np.ones(K) if step_weight is None else np.asarray(step_weight, float)
+    qk = q if q.ndim == 2 else np.tile(q, (K, 1)) / omega[:, None]   # (K, ns) scales
     Wn = starts.size
+    L = np.zeros((ns, 0)) if lin is None else np.asarray(lin, float)
+    na = L.shape[1] // ns
+    Ls = [L[:, l * ns:(l + 1) * ns] for l in range(na)]
     s = S[starts].copy()                                   # (W, ns)
+    hist = [s]                                             # s_hat_0 .. s_hat_j
     G = np.zeros((Wn, ns, P))
+    Gh = [G]                                               # G_0 .. G_j
     e = np.empty((Wn, K, ns))
     J = np.empty((Wn, K, ns, P)) if jacobian else None
     o_b1, o_W2 = H * ni, H * ni + H
@@ -68,26 +80,36 @@ def kstep_jacobian(theta, S, E, D, starts, K, hidden, in_mean, in_scale, out_sca
             for i in range(ns):
                 B[:, i, o_W2 + i:o_b2:ns] = r[i] * a         # W2[i, h] at h ns + i
                 B[:, i, o_b2 + i] = r[i]
-            G = G + np.einsum("wik,wkp->wip", A, G) + B
-        s = s + D[t] + out
-        e[:, j] = (S[t + 1] - s) / q * omega[j]
+            Gn = G + np.einsum("wik,wkp->wip", A, G) + B
+            for l in range(na):
+                if j - l >= 1:
+                    Gn = Gn + np.einsum("ik,wkp->wip", Ls[l], Gh[j - l])
+            G = Gn
+            Gh.append(G)
+        lin_term = np.zeros_like(s)
+        for l in range(na):
+            past = hist[j - l] if j - l >= 0 else S[t - l]   # measured before the start
+            lin_term += past @ Ls[l].T
+        s = s + D[t] + out + lin_term
+        hist.append(s)
+        e[:, j] = (S[t + 1] - s) / qk[j]
         if jacobian:
-            J[:, j] = G / q[None, :, None] * omega[j]
+            J[:, j] = G / qk[j][None, :, None]
     e = e.reshape(-1)
     return (e, J.reshape(-1, P)) if jacobian else (e, None)
 
 
 def kstep_residuals(theta, S, E, D, starts, K, hidden, in_mean, in_scale, out_scale,
-                    err_scale, step_weight=None):
+                    err_scale, step_weight=None, lin=None):
     return kstep_jacobian(theta, S, E, D, starts, K, hidden, in_mean, in_scale, out_scale,
-                          err_scale, step_weight, jacobian=False)[0]
+                          err_scale, step_weight, lin, jacobian=False)[0]
 
 
 def kstep_lm(theta0, args, epochs, mu=1e-3, mu_dec=0.1, mu_inc=10.0, mu_max=1e10,
              min_grad=1e-7):
     """trainlm's loop (reference.levenberg_marquardt's order of stop tests, no validation) on
     the k-step error; ``args`` = (S, E, D, starts, K, hidden, in_mean, in_scale, out_scale,
-    err_scale). Returns (theta, mse history)."""
+    err_scale[, step_weight[, lin]]). Returns (theta, mse history)."""
     theta = np.array(theta0, float)
 
     def mse_of(th):

@@ -4,18 +4,22 @@
 // The model (ns recurrent states s, ne exogenous network inputs e, H tanh hidden units):
 //   x_t = [(s_t - m) / c ; e_t]                              (ni = ns + ne network inputs)
 //   o_t = r o (W2 tanh(W1 x_t + b1) + b2)                     (the network's residual)
-//   s_{t+1} = s_t + d_t + o_t                                 (d_t: the physics increment,
+//   s_{t+1} = s_t + d_t + o_t + sum_l L_l s_{t-l}             (d_t: the physics increment,
 //                                                              computed outside from the inputs)
+// The linear part L = [L_0 .. L_{na-1}] (ns x na ns, optional: KStepShape::lin) carries a
+// linear base model's state dependence (an ARX: L_0 = A_1 - I, L_l = A_{l+1}); states before
+// a window's start are the measured ones (so a start a needs a >= na - 1).
 // theta = [W1(:); b1; W2(:); b2] in the project's layout (column-major, W1 H x ni, W2 ns x H;
 // reference/__init__.py), D = H ni + H + ns H + ns.
 //
 // The error: windows of K steps from the measured state s_a at each start a (the caller keeps
 // windows inside one record); residual row (w, j, i) = omega_j (S[a + j, i] - s_hat_j,i) / q_i,
-// j = 1..K (q: the error scale per state, omega: an optional weight per step, 1 without);
+// j = 1..K (q: the error scale per state, omega: an optional weight per step, 1 without; or
+// q_{j,i} / omega_j replaced by one scale per step and state, KStepShape::err_scale_k);
 // mse = sum e^2 / (W K ns).
 //
 // Jacobian by forward sensitivities, G_j = d s_hat_j / d theta (D x ns), G_0 = 0:
-//   G_{j+1} = G_j + G_j A_j^T + B_j,  A_j = d o / d s = diag(r) W2 diag(1 - a^2) W1[:, :ns]
+//   G_{j+1} = G_j + G_j A_j^T + sum_l G_{j-l} L_l^T + B_j (G_i = 0 for i <= 0),  A_j = d o / d s = diag(r) W2 diag(1 - a^2) W1[:, :ns]
 //   diag(1/c); B_j = d o / d theta at fixed s: dO_i/dW2[i,h] = r_i a_h, dO_i/db2[i] = r_i,
 //   dO_i/dW1[h,k] = r_i W2[i,h] (1 - a_h^2) x_k, dO_i/db1[h] = r_i W2[i,h] (1 - a_h^2).
 // The rows of J = G / q of one window (K ns columns of D values) go through the rank update
@@ -65,13 +69,19 @@ struct KStepShape {
   const double* out_scale = nullptr;
   const double* err_scale = nullptr;
   const double* step_weight = nullptr;   // K weights of the steps' errors (null: all 1)
+  const double* err_scale_k = nullptr;   // K x ns scales per step and state (row-major); given,
+                                         // they replace err_scale / step_weight
+  Index na = 0;                          // lags of the linear part (0: none)
+  const double* lin = nullptr;           // L, ns x (na ns) row-major: L[i, l ns + k]
   Index ni() const { return ns + ne; }
+  Index lin_lags() const { return lin ? na : 0; }
   Index dim() const { return H * ni() + H + ns * H + ns; }
 };
 
 inline bool check_windows(const KStepShape& sh, const KStepData& d) {
   for (Index w = 0; w < d.W; ++w)
-    if (d.starts[w] < 0 || d.starts[w] + sh.K >= d.N) return false;
+    if (d.starts[w] < std::max<Index>(sh.lin_lags() - 1, 0) || d.starts[w] + sh.K >= d.N)
+      return false;
   return true;
 }
 
@@ -109,7 +119,7 @@ class KStep {
 
  private:
   struct Scratch {
-    std::vector<double> x, a, g, c, A, G, Gn, V, e, st;
+    std::vector<double> x, a, g, c, A, G, V, e, st;
   };
   struct Slot {
     std::vector<double> jtj, jte;
@@ -123,11 +133,10 @@ class KStep {
     s.g.resize(static_cast<size_t>(H));
     s.c.resize(static_cast<size_t>(ns * H));
     s.A.resize(static_cast<size_t>(ns * ns));
-    s.G.resize(static_cast<size_t>(D_ * ns));
-    s.Gn.resize(static_cast<size_t>(D_ * ns));
+    s.G.resize(static_cast<size_t>(D_ * ns * (sh_.K + 1)));   // G_0 .. G_K
     s.V.resize(static_cast<size_t>(D_ * ns * sh_.K));
     s.e.resize(static_cast<size_t>(ns * sh_.K));
-    s.st.resize(static_cast<size_t>(ns));
+    s.st.resize(static_cast<size_t>(ns * (sh_.K + 1)));       // s_hat_0 .. s_hat_K
   }
 
   // One window from row a: residuals into e (K ns); with sens, the scaled sensitivities into
@@ -140,11 +149,14 @@ class KStep {
     const double* W2 = b1 + H;             // ns x H: W2[h ns + i]
     const double* b2 = W2 + ns * H;
     const Index o_b1 = H * ni, o_W2 = o_b1 + H, o_b2 = o_W2 + ns * H;
-    double* st = s.st.data();
-    for (Index i = 0; i < ns; ++i) st[i] = d.S[a * ns + i];
-    if (sens) std::fill(s.G.begin(), s.G.end(), 0.0);
+    const Index nl = sh_.lin_lags(), nlin = nl * ns;
+    double* sh = s.st.data();   // sh + j ns: s_hat_j (s_hat_0 the measured start)
+    for (Index i = 0; i < ns; ++i) sh[i] = d.S[a * ns + i];
+    if (sens) std::fill(s.G.begin(), s.G.begin() + D * ns, 0.0);
     for (Index j = 0; j < sh_.K; ++j) {
       const Index t = static_cast<Index>(a) + j;
+      const double* st = sh + j * ns;
+      double* nx = sh + (j + 1) * ns;
       double* x = s.x.data();
       for (Index k = 0; k < ns; ++k) x[k] = (st[k] - sh_.in_mean[k]) / sh_.in_scale[k];
       for (Index l = 0; l < ne; ++l) x[ns + l] = d.E[t * ne + l];
@@ -162,16 +174,17 @@ class KStep {
         for (Index h = 0; h < H; ++h) g[h] = 1.0 - av[h] * av[h];
         for (Index i = 0; i < ns; ++i)
           for (Index h = 0; h < H; ++h) c[i * H + h] = sh_.out_scale[i] * W2[h * ns + i] * g[h];
-        double* A = s.A.data();   // A[i ns + k] = d o_i / d s_k
+        double* A = s.A.data();   // A[i ns + k] = d o_i / d s_k (+ L_0[i, k])
         for (Index i = 0; i < ns; ++i)
           for (Index k = 0; k < ns; ++k) {
             double acc = 0.0;
             for (Index h = 0; h < H; ++h) acc += c[i * H + h] * W1[k * H + h];
-            A[i * ns + k] = acc / sh_.in_scale[k];
+            A[i * ns + k] = acc / sh_.in_scale[k] + (nl ? sh_.lin[i * nlin + k] : 0.0);
           }
-        // Gn[:, i] = G[:, i] + sum_k A[i,k] G[:, k] + B[:, i]
-        const double* G = s.G.data();
-        double* Gn = s.Gn.data();
+        // G_{j+1}[:, i] = G_j[:, i] + sum_k A[i,k] G_j[:, k] + sum_{l>=1} L_l[i,k] G_{j-l}[:, k]
+        //                 + B[:, i]
+        const double* G = s.G.data() + j * D * ns;
+        double* Gn = s.G.data() + (j + 1) * D * ns;
         for (Index i = 0; i < ns; ++i) {
           double* out = Gn + i * D;
           const double* gi = G + i * D;
@@ -180,6 +193,14 @@ class KStep {
             const double aik = A[i * ns + k];
             const double* gk = G + k * D;
             for (Index p = 0; p < D; ++p) out[p] += aik * gk[p];
+          }
+          for (Index l = 1; l < nl && j - l >= 1; ++l) {
+            const double* Gl = s.G.data() + (j - l) * D * ns;
+            for (Index k = 0; k < ns; ++k) {
+              const double lik = sh_.lin[i * nlin + l * ns + k];
+              const double* gk = Gl + k * D;
+              for (Index p = 0; p < D; ++p) out[p] += lik * gk[p];
+            }
           }
           const double* ci = c + i * H;
           for (Index k = 0; k < ni; ++k) {
@@ -192,19 +213,25 @@ class KStep {
           for (Index h = 0; h < H; ++h) out[o_W2 + h * ns + i] += ri * av[h];
           out[o_b2 + i] += ri;
         }
-        s.G.swap(s.Gn);
       }
       for (Index i = 0; i < ns; ++i) {
         double o = b2[i];
         for (Index h = 0; h < H; ++h) o += W2[h * ns + i] * av[h];
-        st[i] += d.Dr[t * ns + i] + sh_.out_scale[i] * o;
+        double lin = 0.0;
+        for (Index l = 0; l < nl; ++l) {
+          // s_{t-l}: predicted for j - l >= 1, else measured (row a + j - l)
+          const double* sl = j - l >= 1 ? sh + (j - l) * ns : d.S + (t - l) * ns;
+          const double* Li = sh_.lin + i * nlin + l * ns;
+          for (Index k = 0; k < ns; ++k) lin += Li[k] * sl[k];
+        }
+        nx[i] = st[i] + d.Dr[t * ns + i] + sh_.out_scale[i] * o + lin;
       }
       const double wj = sh_.step_weight ? sh_.step_weight[j] : 1.0;
       for (Index i = 0; i < ns; ++i) {
-        const double q = sh_.err_scale[i] / wj;
-        e[j * ns + i] = (d.S[(t + 1) * ns + i] - st[i]) / q;
+        const double q = sh_.err_scale_k ? sh_.err_scale_k[j * ns + i] : sh_.err_scale[i] / wj;
+        e[j * ns + i] = (d.S[(t + 1) * ns + i] - nx[i]) / q;
         if (sens) {
-          const double* gi = s.G.data() + i * D;
+          const double* gi = s.G.data() + (j + 1) * D * ns + i * D;
           double* v = s.V.data() + (j * ns + i) * D;
           for (Index p = 0; p < D; ++p) v[p] = gi[p] / q;
         }

@@ -1,0 +1,168 @@
+"""The ARX-anchored k-step model (kind arx_kstep) on the nano-drone benchmark's cross-trajectory
+protocol, beside naive, the chosen ARX and the physics + network model (quad_hybrid).
+
+    python docs/examples/nanodrone/anchored_crossfold.py OUT_DIR [--types square,random1,...]
+        [--quick]
+
+Per fold (``cdam_core.evaluate.crossfold.AnchoredFitter`` through ``cross_trajectory_fold``):
+the ARX's orders chosen on the training flights (the fold's baseline); the network on the ARX's
+k-step residual trained on the fit flights, its epoch count taken where the validation flights'
+k-step error is least, kept only if it lowers the validation score (MAE / naive, mean over
+h = 1, 10, 25, 50 and the groups) below the ARX's, then retrained on all training flights.
+quad_hybrid runs with the structure its validation chose on every fold last time (its
+defaults). Every predictor scored on the test type at every horizon 1..50 on the same rows.
+Prints and writes (OUT_DIR/index.md, results.json) the RMSE per group at h = 1, 5, 10, 20, 50
+per fold and the mean over the folds, and per group the horizons where the anchored model is
+below each of the others; with the committed papernets results (docs/examples/papernets/
+results.json) beside it, the horizons where it is below every paper network's mean curve.
+``--quick``: tiny settings (checks the output, numbers not meaningful). The folds can run as
+separate processes (``--types square,random1`` into A, ``--types random2,multisine`` into B;
+each writes its folds to folds.pkl) and be joined with ``--merge A B`` (the page of all folds).
+"""
+import os
+
+for _v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_v, "1")
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import pickle  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+from cdam_core.base.jsonio import write_json_atomic, write_text_atomic  # noqa: E402
+from cdam_core.evaluate.crossfold import (ANCHORED_FIXED, ANCHORED_GRID,  # noqa: E402
+                                          TYPES, AnchoredFitter, cross_trajectory_fold,
+                                          mean_over_folds)
+from cdam_core.models.flight.hybrid import QuadHybrid  # noqa: E402
+from cdam_core.record.realdata.nanodrone import nanodrone_files  # noqa: E402
+
+AT = (1, 5, 10, 20, 50)
+SHOWN = ("naive", "arx", "quad_hybrid", "anchored")
+PAPERNETS = Path(__file__).resolve().parents[1] / "papernets" / "results.json"
+
+
+def rmse_table(scores, names=SHOWN, at=AT) -> str:
+    """Markdown: RMSE per group (columns) of each predictor at each horizon of ``at``."""
+    groups = [g.name for g in scores.groups]
+    lines = ["| predictor | h | " + " | ".join(groups) + " |", "|---|---|" + "---|" * len(groups)]
+    for name in names:
+        if name not in scores.group_rmse:
+            continue
+        for h in at:
+            r = scores.group_rmse[name][scores.horizons.index(h)]
+            lines.append(f"| {name} | {h} | " + " | ".join(f"{v:.4g}" for v in r) + " |")
+    return "\n".join(lines)
+
+
+def wins(scores, against, model="anchored", extra=None) -> list[str]:
+    """Per group and other predictor: the horizons (of 1..50) where ``model`` is lower."""
+    g = scores.group_rmse
+    others = {k: np.asarray(g[k]) for k in against if k in g}
+    others.update(extra or {})
+    lines = []
+    for j, group in enumerate(gr.name for gr in scores.groups):
+        parts = []
+        for name, curve in others.items():
+            below = np.asarray(g[model])[:, j] < curve[:, j]
+            parts.append(f"{name} {int(below.sum())}/{below.size}")
+        lines.append(f"- {group}: below " + ", ".join(parts))
+    return lines
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("out", help="output folder (created)")
+    ap.add_argument("--types", default=",".join(TYPES))
+    ap.add_argument("--quick", action="store_true", help="tiny settings (output check only)")
+    ap.add_argument("--merge", nargs="+", default=None,
+                    help="join the folds.pkl of earlier runs' folders (no training)")
+    args = ap.parse_args(argv)
+    if args.merge:
+        folds, choices, md = [], [], []
+        for d in args.merge:
+            with open(Path(d) / "folds.pkl", "rb") as fh:   # written by this script
+                f, c, m = pickle.load(fh)
+            folds += f
+            choices += c
+            md += m
+        return _write(Path(args.out), folds, choices, md, ANCHORED_FIXED)
+    try:
+        files = nanodrone_files(None)
+    except FileNotFoundError as exc:
+        print(f"anchored_crossfold.py: error: the nano-drone flights are not here: {exc}; set "
+              f"CDAM_SHARED_DATA to the folder holding nanodrone/", file=sys.stderr)
+        return 3
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    fixed = dict(ANCHORED_FIXED, epochs=2) if args.quick else None
+    hybrid_kw = dict(epochs=2) if args.quick else {}
+    fitter = AnchoredFitter(fixed=fixed)
+
+    def quad_hybrid(train, fit, valid):
+        dt = float(np.median(np.diff(train.t)))
+        return QuadHybrid(dt=dt, **hybrid_kw).fit(train.U, train.Y, segments=train.lengths)
+
+    loaded, folds, md = {}, [], []
+    for test_type in [t.strip() for t in args.types.split(",") if t.strip()]:
+        t0 = time.perf_counter()
+        f = cross_trajectory_fold(files, test_type, loaded=loaded, physics=False,
+                                  models={"quad_hybrid": quad_hybrid, "anchored": fitter})
+        folds.append(f)
+        c = fitter.choices[-1]
+        head = (f"## Test type {test_type} (ARX orders {tuple(f.orders)}; anchored: chosen "
+                f"{c['chosen']}, epochs {c['epochs']}; validation MAE / naive "
+                + ", ".join(f"{k} {v:.4f}" for k, v in c["validation"].items())
+                + f"; selection {c['select_seconds']:.0f} s, final fit {c['fit_seconds']:.0f} s;"
+                f" fold {time.perf_counter() - t0:.0f} s)")
+        body = [rmse_table(f.scores), "", "Horizons (of 1..50) where anchored is below:", "",
+                *wins(f.scores, ("naive", "arx", "quad_hybrid"))]
+        print(head + "\n\n" + "\n".join(body) + "\n", flush=True)
+        md += [head, "", *body, ""]
+    with open(out / "folds.pkl", "wb") as fh:
+        pickle.dump((folds, fitter.choices, md), fh)
+    return _write(out, folds, fitter.choices, md, fitter.fixed)
+
+
+def _write(out, folds, choices, md, fixed) -> int:
+    """The mean over the folds, the page and results.json."""
+    out.mkdir(parents=True, exist_ok=True)
+    mean = mean_over_folds(folds)
+    extra = {}
+    if PAPERNETS.exists() and len(folds) == len(TYPES):
+        js = json.loads(PAPERNETS.read_text())["mean"]
+        nets = {k: np.stack([np.asarray(v[g.name]) for g in mean.groups], axis=1)
+                for k, v in js["group_rmse"].items()
+                if k.endswith(("_static", "_narx", "_chosen"))}   # {group: curve} per net
+        if nets:
+            extra["paper networks (best of each h)"] = np.min(np.stack(list(nets.values())), 0)
+    body = [rmse_table(mean), "", "Horizons (of 1..50) where anchored is below:", "",
+            *wins(mean, ("naive", "arx", "quad_hybrid"), extra=extra)]
+    print("## Mean over the folds\n\n" + "\n".join(body), flush=True)
+    page = ["# ARX-anchored k-step model on the cross-trajectory protocol", "",
+            "Produced by `python docs/examples/nanodrone/anchored_crossfold.py OUT_DIR`. RMSE "
+            "per group (position m, velocity m/s, attitude rad, rates rad/s) on the test type, "
+            "k-step from the measured state with the measured rotor speeds, all predictors on "
+            "the same rows. anchored: kind arx_kstep, structures " + json.dumps(ANCHORED_GRID)
+            + " over " + json.dumps(fixed) + " (the epoch count: the validation "
+            "flights' best); the paper networks' curves are the committed "
+            "docs/examples/papernets/results.json (same folds and test flights).", "",
+            f"## Mean over the {len(folds)} folds", "", *body, "", *md]
+    write_text_atomic(out / "index.md", "\n".join(page) + "\n")
+    write_json_atomic(out / "results.json", {
+        "folds": [{"test_type": f.test_type, "arx_orders": list(f.orders), "anchored": c,
+                   "group_rmse": {k: np.asarray(v).tolist() for k, v in
+                                  f.scores.group_rmse.items()}}
+                  for f, c in zip(folds, choices)],
+        "mean": {"groups": [g.name for g in mean.groups], "horizons": mean.horizons,
+                 "group_rmse": {k: np.asarray(v).tolist() for k, v in mean.group_rmse.items()},
+                 "group_mae": {k: np.asarray(v).tolist() for k, v in mean.group_mae.items()}}})
+    print(f"report: {out / 'index.md'}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
