@@ -123,7 +123,8 @@ def run(args) -> int:
         for f in js["findings"]:
             print(f"found {f['effect']} on {f['channel']}: {f['parameters']}")
         for u in js["unexplained"]:
-            what = ("a periodic component not in the inputs" if u["kind"] == "periodic_line"
+            what = ("a periodic component the model's terms cannot produce"
+                    if u["kind"] == "periodic_line"
                     else "unexplained structure")
             print(f"{what} on {u['channel']} at {u['frequency_hz']:.2f} Hz"
                   + (f", amplitude {u['amplitude']:.3g}" if "amplitude" in u else ""))
