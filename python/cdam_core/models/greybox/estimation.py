@@ -330,44 +330,20 @@ def _std(As: np.ndarray, scale: np.ndarray, wsse: float, rows: int, names: list)
 def set_equation_weights(sig: dict, fitted: Fit) -> dict:
     """Store IDIM-WLS weights in the prepared signals ``sig``: each equation's weight is
     1 / the RMS of its residual in ``fitted`` (scaled so the largest weight is 1); later
-    :func:`fit` calls on ``sig`` use them. Returns the weights.
-
-    A model with errors-in-variables equations (``eiv_equations``: regressors built from noisy
-    twice-differentiated signals, which bias the parameters they share with clean equations)
-    is weighted from its two-stage estimate instead (:func:`_two_stage_residuals`): the clean
-    equations alone give every parameter they hold, then the errors-in-variables equations'
-    own parameters are estimated with the shared ones held there. The RMS of each equation's
-    residual at that estimate is its noise level at parameters it did not pull, so the relative
-    weight of the errors-in-variables equations is the ratio of the equations' noise levels
-    the data show (it replaced a fixed factor of 1e-3)."""
-    if not hasattr(sig, "weights"):
-        raise ValueError("sig: expected prepared signals (a Signals from model.prepare)")
-    resid = fitted.residuals
-    if any(eq in resid for eq in getattr(fitted.model, "eiv_equations", ())):
-        resid = _two_stage_residuals(sig, fitted)
-    rms = {eq: float(np.sqrt(np.mean(r ** 2))) for eq, r in resid.items()}
+    :func:`fit` calls on ``sig`` use them. Returns the weights."""
+    rms = {eq: float(np.sqrt(np.mean(r ** 2))) for eq, r in fitted.residuals.items()}
     pos = [v for v in rms.values() if v > 0]
     floor = min(pos) if pos else 1.0
     w = {eq: floor / max(v, floor) for eq, v in rms.items()}
+    # errors-in-variables equations (regressors built from noisy twice-differentiated signals)
+    # get a further factor: parameters they share with clean equations come from the clean ones
+    for eq in getattr(fitted.model, "eiv_equations", ()):
+        if eq in w:
+            w[eq] *= float(getattr(fitted.model, "eiv_weight", 1.0))
+    if not hasattr(sig, "weights"):
+        raise ValueError("sig: expected prepared signals (a Signals from model.prepare)")
     sig.weights = w
     return w
-
-
-def _two_stage_residuals(sig, fitted: Fit) -> dict:
-    """The residuals of the two-stage estimate (see :func:`set_equation_weights`). Shared
-    parameters of effects (not the model's own) are estimated again in the second stage."""
-    model = fitted.model
-    eiv = set(model.eiv_equations)
-    trim = fitted.keep.start if isinstance(fitted.keep, slice) else 50
-    sig.weights = {eq: (0.0 if eq in eiv else 1.0) for eq in fitted.residuals}
-    first = fit(model, sig, fitted.effects, trim)
-    clean = {p for eq in first.residuals if eq not in eiv for p in first.columns.get(eq, [])}
-    shared = {p for eq in eiv for p in first.columns.get(eq, [])} & clean \
-        & set(model.parameter_names)
-    sig.weights = {}
-    second = fit(type(model)({**model.fixed, **{p: first.theta[p] for p in shared}}), sig,
-                 fitted.effects, trim)
-    return second.residuals
 
 
 def apply_fit(fitted: Fit, sig: dict, trim: int | None = None) -> Fit:

@@ -41,15 +41,11 @@ regressors hold the body's twice-differentiated position and attitude noise (X''
 from 5 mm noise is about 0.07 g in the specific force) and, at the body's band, they miss the
 arm-body exchange at the cable modes; stacked with equal weight they dragged the shared cable
 parameters (Ks 10 % low without noise, 37 % low at the default noise, K3 nearly doubled). The
-estimate is therefore IDIM-WLS with weights 1 / each equation's RMS residual at the two-stage
-estimate (estimation.set_equation_weights): the motor equation (3), whose input enters
-directly and whose regressors (motor angle, cable deflection) are clean, sets Im, Dm, Ks, Kd;
-the link equations set the link parameters given the cable torque (two-stage IDIM); the
-residuals of that estimate give each equation's noise level, and so the link equations'
-weight (measured on "both", 10 s, seed 1, 1 x noise: 0.035 and 0.11 of the best
-equation's, against 4e-5 and 1.2e-4 with the fixed factor 1e-3 on the OLS weights before). Ks1 / Ks2 (truth 20 / 15) at 0 / 1 / 3 x
-noise: 19.97 / 15.01, 19.98 / 14.99, 19.92 / 14.72 (with the fixed factor: 19.97 / 15.01,
-19.99 / 15.01, 19.98 / 14.89: Ks2 at 3 x noise 1.1 % further from the truth).
+estimate is therefore IDIM-WLS (weights 1 / each equation's RMS residual) with the link
+equations weighted a further 1e-3: the motor equation (3), whose input enters directly and
+whose regressors (motor angle, cable deflection) are clean, sets Im, Dm, Ks, Kd and the cable
+effects; the link equations set the link parameters given the cable torque (two-stage IDIM).
+Measured on "both", 10 s, seed 1: Ks1 19.97 / 19.99 / 19.98 (truth 20) at 0 / 1 / 3 x noise.
 The link parameters (p1, g1) remain biased low (g1 0.27 / 0.24 / 0.12 vs 0.31): regressor
 noise, not identifiable better from these signals.
 """
@@ -199,13 +195,12 @@ class AerialManipulator(Quadrotor):
     # twice-differentiated position and attitude noise and, at the body's band, miss the
     # arm-body exchange at the cable modes (about 25 % of the cable torque stays in their
     # residual even without noise). Parameters they share with the motor equations (Ks, Kd,
-    # the cable effects) are therefore taken from the motor equations: the WLS weights come
-    # from the two-stage estimate's residuals (estimation.set_equation_weights: the link
-    # equations weigh by the ratio of the equations' noise levels at the motor equations'
-    # parameters, from the data), and an effect that changes only link equations
+    # the cable effects) are therefore taken from the motor equations (weight 1e-3 on top of
+    # the WLS weights: the two-stage limit), and an effect that changes only link equations
     # must remove at least 20 % of their residual to be claimed (the mismatch correlates with
     # any velocity-shaped regressor at a few percent).
     eiv_equations = ("tau_l1", "tau_l2")
+    eiv_weight = 1e-3
     eiv_min_gain = 0.2
     joint_depth = 0.08   # m, joint 1 below the body origin (geometry of the build, not fitted)
 
