@@ -391,12 +391,16 @@ def test_emps_example_as_written_in_a_plain_clone(clone):
     assert f"held-out window error by {gain:.0f} %" in text
     assert f"(Wilcoxon p {oe['p_value']:.3f} at level {oe['level']:g}" in text
     assert js["settings"]["stability"]["stable"]
-    # the residual's lines: 50 Hz mains and 20.4 Hz on both records; PULSES under the hold
-    # the data choose there too (the 24 Hz hump of the published timing: tests/residual/test_emps)
+    # the residual's lines: the mains' near 50 Hz (DATA_EMPS) and 100 Hz (both) unexplained;
+    # the 20.4 Hz line of both records within what the model's terms produce (listed as the
+    # model's); PULSES under the hold the data choose there too (the 24 Hz hump of the
+    # published timing: tests/residual/test_emps)
     pulses = json.loads((out / "pulses" / "residual.json").read_text())
-    for rec in (js, pulses):
+    for rec, mains in ((js, 50.0), (pulses, 100.0)):
         lines = [u["frequency_hz"] for u in rec["unexplained"] if u["kind"] == "periodic_line"]
-        assert any(abs(f - 50) < 0.7 for f in lines) and any(abs(f - 20.4) < 0.1 for f in lines)
+        assert any(abs(f - mains) < 0.7 for f in lines), lines
+        model = rec["settings"]["residual_structure_explained_by_the_model"]["explained"]
+        assert any(abs(u["frequency_hz"] - 20.4) < 0.1 for u in model)
     tp = pulses["settings"]["timing"]
     assert tp["chosen"] == "held" and f"data choose (p {_p(tp['p_value'])} there)" in text
     md = (out / "index.md").read_text()                  # "with their amplitudes": in N

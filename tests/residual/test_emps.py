@@ -97,11 +97,15 @@ def test_emps_pulses_free_run_error(emps_selection):
 
 def test_emps_pulses_resonance_is_unexplained(emps_selection):
     """PULSES's 17-23 Hz structure: under the published timing (force sample against the state
-    at the same instant) a broad spectral peak near 24 Hz, more than a decade above its base,
-    reported as unexplained. Under the zero-order hold the held-out data choose, the residual
-    RMS falls 26 % (5.93 -> 4.40 N, measured) and the hump with it (0.06 decades): most of it
-    was the half-sample timing error acting on the pulses' edges; the narrow 20.4 Hz line
-    stays, reported as unexplained."""
+    at the same instant) a broad spectral peak near 24 Hz, more than a decade above its base;
+    the model's terms driven by the force alone account for under a fifth of the band's power
+    (measured 0.185), so it stays reported as unexplained. Under the zero-order hold the
+    held-out data choose, the residual RMS falls 26 % (5.93 -> 4.40 N, measured) and the hump
+    with it (0.06 decades): most of it was the half-sample timing error acting on the pulses'
+    edges. The narrow 20.4 Hz line that stays (0.33 N) is within what the model's own terms
+    produce there (its line is 0.69 of the largest input-driven term: the Coulomb terms' sign
+    columns are broadband), so it is listed as the model's, with its attribution; the mains
+    lines near 100 Hz are not (3.9-5.4 times the largest term) and stay unexplained."""
     from cdam_core.residual import analyse
     p = load_emps("DATA_EMPS_PULSES")
     sig = {"tau": p["force"], "q": p["qm"]}
@@ -114,14 +118,18 @@ def test_emps_pulses_resonance_is_unexplained(emps_selection):
     held = analyse("rigid_axis", p["t"], sig, free_run=False)
     assert held.settings["timing"]["chosen"] == "held"
     lines = [u["frequency_hz"] for u in held.unexplained if u["kind"] == "periodic_line"]
-    assert any(abs(f - 20.4) < 0.3 for f in lines), held.unexplained
+    assert any(abs(f - 100.0) < 0.5 for f in lines), held.unexplained
+    assert not any(15.0 <= f <= 27.0 for f in lines), held.unexplained
+    model = held.settings["residual_structure_explained_by_the_model"]["explained"]
+    at20 = [u for u in model if abs(u["frequency_hz"] - 20.4) < 0.3]
+    assert at20 and at20[0]["attribution"]["relative_to_terms"] < 1.0
     assert np.std(held.final.residuals["tau"]) < 0.85 * np.std(sampled.final.residuals["tau"])
     # the broad 17-23 Hz resonance is a PULSES phenomenon; DATA_EMPS's residual holds narrow
-    # periodic lines only (50 Hz mains and its neighbours, a 20.4 Hz line on both records).
+    # periodic lines only, the mains' near 50 and 100 Hz unexplained.
     # DATA_EMPS's analysis is the module's (the free runs on PULSES do not enter its residual)
-    assert emps_selection.unexplained
-    assert not any(15.0 <= u["frequency_hz"] <= 27.0 for u in emps_selection.unexplained
-                   if u["kind"] == "spectral_peak")
+    un = emps_selection.unexplained
+    assert any(abs(u["frequency_hz"] - 50.0) < 0.7 for u in un), un
+    assert not any(15.0 <= u["frequency_hz"] <= 27.0 for u in un if u["kind"] == "spectral_peak")
 
 
 def test_benchmark_protocol_reproduces_the_published_model():

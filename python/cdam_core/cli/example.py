@@ -3,7 +3,7 @@
 ``python -m cdam_core.cli.example emps OUT_DIR`` writes the EMPS residual report
 (DATA_EMPS fitted with ``rigid_axis``: Coulomb then asymmetric friction found; free-run errors
 on DATA_EMPS_PULSES) into ``OUT_DIR`` (index.md, residual.json, PNG figures), and a second
-report for DATA_EMPS_PULSES alone (its 17-23 Hz resonance reported as unexplained) into
+report for DATA_EMPS_PULSES alone (its residual's lines tested against the model's terms) into
 ``OUT_DIR/pulses``.
 ``python -m cdam_core.cli.example flight OUT_DIR`` writes the report of a simulated
 flight with a hidden thrust loss (``cdam simulate`` + ``aerial_manipulator``).

@@ -207,8 +207,8 @@ def _summary(js: dict) -> list[str]:
     if not js["findings"]:
         out.append("no effect found")
     for u in js["unexplained"]:
-        what = ("a periodic component not in the inputs" if u["kind"] == "periodic_line"
-                else "unexplained structure")
+        what = ("a periodic component the model's terms cannot produce"
+                if u["kind"] == "periodic_line" else "unexplained structure")
         out.append(f"{what} on {u['channel']} at {u['frequency_hz']:.2f} Hz"
                    + (f", amplitude {u['amplitude']:.3g}" if "amplitude" in u else ""))
     for label, sc in (js.get("test") or {}).get("scores", {}).items():

@@ -275,12 +275,15 @@ def write_report(sel: Selection, out_dir, title: str | None = None, source: str 
                      f"amplitude {u['amplitude']:.3g}"
                      f"{(' ' + channel_unit(sel.model.name, u['channel'], units)).rstrip()} "
                      f"(x{u['ratio_to_background']:.3g} "
-                     f"the background, p {u['p_value']:.2g})") + " |"
+                     f"the background, p {u['p_value']:.2g}"
+                     + (f"; {u['attribution']['unexplained_amplitude']:.3g} beyond what the "
+                        "model's terms driven by the inputs produce" if "attribution" in u
+                        else "") + ")") + " |"
                   for u in sel.unexplained]
         lines += ["", "No library effect explains these; they are reported, not fitted."]
     else:
-        lines += ["None found (no spectral peak of 1 decade or more, no periodic line outside "
-                  "the inputs' own lines)."]
+        lines += ["None found (no spectral peak of 1 decade or more and no periodic line "
+                  "beyond what the model's terms, driven by the measured inputs, produce)."]
     _figure_spectrum(out / "spectrum.png", sel, units)
     lines += [""] + figure("spectrum.png", "spectrum",
                            f"Figure {len(sel.steps) + 1}: power spectral density (Welch) of the "

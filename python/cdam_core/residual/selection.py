@@ -21,6 +21,7 @@ import numpy as np
 from scipy import optimize, stats
 
 from cdam_core.residual import diagnostics as dg
+from cdam_core.residual.attribution import attribute, hann_dft, input_driven_terms
 from cdam_core.models.greybox.estimation import Fit, fit, set_equation_weights
 from cdam_core.models.greybox.freerun import free_run_error
 from cdam_core.residual.benchmark import greybox_of
@@ -416,7 +417,36 @@ def select(model, sig: dict, candidates, alpha: float = 0.01, max_steps: int | N
         estimator["alternatives"] = ("not tried: IDIM-IV and output error need held-out "
                                      "simulation windows")
     white = all(dg.whiteness(r, lags)["white"] for r in current.residuals.values())
-    unexplained = []
+    unexplained, at_model = _unexplained_structure(model, sig, current, fs, alpha,
+                                                   min_prominence, spectrum_seconds, lags,
+                                                   substeps)
+    # [greybox] item 4: the final model linearised at rest (a model that falls over is said)
+    try:
+        stability = greybox_of(current, float(sig["dt"])).stability()
+    except ValueError as exc:
+        stability = {"status": "unavailable", "reason": str(exc)}
+    settings = {"declared_effects": sorted(dkeys), "removed_in_backward_pass": removed,
+                "stability": stability,
+                "validation": cv_info, "declared_terms_dropped": dropped_terms,
+                "estimator": estimator,
+                "residual_structure_explained_by_the_model": at_model,
+                "alpha": alpha, "min_gain": min_gain, "trim": trim, "lags": lags, "min_prominence_decades": min_prominence,
+                "candidates": [c.key for c in candidates]}
+    return Selection(model, declared, current, steps, declared_error, white, unexplained,
+                     settings, store, final_error, removed)
+
+
+def _unexplained_structure(model, sig, current: Fit, fs: float, alpha: float,
+                           min_prominence: float, spectrum_seconds: float, lags: int,
+                           substeps) -> tuple[list, dict]:
+    """Spectral peaks and narrow lines of the final residual that the model's own structure
+    cannot produce (:mod:`cdam_core.residual.attribution`): each is tested against the model's
+    terms driven by the measured inputs alone (a free run); a peak or line they account for
+    (p >= alpha / the number tested) is the model's error at a frequency its inputs drive, not
+    a disturbance. Returns (unexplained, {"rule", "explained": [...]} or the reason the model
+    could not be run, in which case a line near a line of a measured input counts as the
+    model's, the earlier rule)."""
+    found = []
     # above the derivative filter's band the equation error holds only the unfiltered
     # measured torque, and differentiated noise rises towards the cutoff (a hump that is the
     # filter's shape, not structure), so peaks are sought below 0.5 x cutoff
@@ -430,36 +460,55 @@ def select(model, sig: dict, candidates, alpha: float = 0.01, max_steps: int | N
         for pk in dg.spectral_peaks(r, fs, min_prominence=min_prominence, fmin=fmin, fmax=fm,
                                     seconds=seconds):
             ac = dg.autocorrelation(r, lags)
-            unexplained.append({"kind": "spectral_peak", "channel": eq, **pk,
-                                "acf_lags_outside_band": len(ac["outside"])})
-    # narrow periodic components at the record's full resolution; a line also found in a
-    # measured input is the model's error at an excitation frequency, one that is not is a
-    # periodic disturbance nobody declared
-    input_lines, at_inputs = [], []
+            found.append({"kind": "spectral_peak", "channel": eq, **pk,
+                          "acf_lags_outside_band": len(ac["outside"])})
+    # narrow periodic components at the record's full resolution
+    for eq, r in current.residuals.items():
+        if np.std(r) == 0 or r.size < 64:
+            continue
+        found += [{"kind": "periodic_line", "channel": eq, **ln}
+                  for ln in dg.spectral_lines(r, fs, alpha, fmax=fmax)]
+    if not found:
+        return [], {"rule": "nothing found"}
+    try:
+        terms = input_driven_terms(current, sig, substeps)
+    except (ValueError, FloatingPointError, np.linalg.LinAlgError, KeyError) as exc:
+        return _near_input_lines(model, sig, current, fs, alpha, found, str(exc))
+    spectra = {eq: (hann_dft(r), [hann_dft(t) for t in terms.get(eq, [])])
+               for eq, r in current.residuals.items()}
+    level = alpha / len(found)
+    unexplained, explained = [], []
+    for u in found:
+        eq = u["channel"]
+        wide = 0.5 * u["width_hz"] if u["kind"] == "spectral_peak" else None
+        a = attribute(current.residuals[eq], None, fs, u["frequency_hz"], wide, spectra[eq])
+        if u["kind"] == "spectral_peak":
+            # the detector's own criterion on what the model's terms leave: the peak falls by
+            # the share they account for; it stays a finding if still min_prominence high
+            left = u["prominence_decades"] + np.log10(max(1.0 - a["explained_share"], 1e-300))
+            keep = left >= min_prominence
+            a = {**a, "prominence_left_decades": float(left)}
+        else:
+            keep = a["p_value"] < level
+        (unexplained if keep else explained).append({**u, "attribution": a})
+    return unexplained, {
+        "rule": "tested against the model's terms driven by the measured inputs alone (free "
+                "run); bounded local regression over the line's main lobe, unexplained at "
+                f"p < {level:.3g} (alpha / {len(found)} tested)", "explained": explained}
+
+
+def _near_input_lines(model, sig, current, fs, alpha, found, reason):
+    """When the model cannot be run from its inputs: a narrow line within the Hann main lobe
+    (2 bins) of a line found in a measured input counts as the model's error there."""
+    input_lines = []
     for u in model.inputs:
         x = np.asarray(sig[u], dtype=float)[current.keep] if u in sig else np.zeros(0)
         if x.size >= 64 and np.std(x) > 0:
             input_lines += [d["frequency_hz"] for d in dg.spectral_lines(x, fs, alpha)]
-    for eq, r in current.residuals.items():
-        if np.std(r) == 0 or r.size < 64:
-            continue
-        for ln in dg.spectral_lines(r, fs, alpha, fmax=fmax):
-            # within the Hann window's main lobe (2 bins): not separable from the input's line
-            near = any(abs(ln["frequency_hz"] - fu) <= 2 * ln["resolution_hz"]
-                       for fu in input_lines)
-            (at_inputs if near else unexplained).append(
-                {"kind": "periodic_line", "channel": eq, **ln})
-    # [greybox] item 4: the final model linearised at rest (a model that falls over is said)
-    try:
-        stability = greybox_of(current, float(sig["dt"])).stability()
-    except ValueError as exc:
-        stability = {"status": "unavailable", "reason": str(exc)}
-    settings = {"declared_effects": sorted(dkeys), "removed_in_backward_pass": removed,
-                "stability": stability,
-                "validation": cv_info, "declared_terms_dropped": dropped_terms,
-                "estimator": estimator,
-                "residual_lines_at_input_frequencies": at_inputs,
-                "alpha": alpha, "min_gain": min_gain, "trim": trim, "lags": lags, "min_prominence_decades": min_prominence,
-                "candidates": [c.key for c in candidates]}
-    return Selection(model, declared, current, steps, declared_error, white, unexplained,
-                     settings, store, final_error, removed)
+    unexplained, explained = [], []
+    for u in found:
+        near = u["kind"] == "periodic_line" and any(
+            abs(u["frequency_hz"] - fu) <= 2 * u["resolution_hz"] for fu in input_lines)
+        (explained if near else unexplained).append(u)
+    return unexplained, {"rule": "near a line of a measured input (the model could not be run "
+                                 f"from its inputs: {reason})", "explained": explained}
