@@ -18,45 +18,136 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from cdam_core.models.greybox.declared import identity as _ident, memo as _memo
+
+
+def _cached(memo, key, held, compute):
+    if memo is None:
+        return compute()
+    got = memo.get(key)
+    return memo.put(key, held, compute()) if got is None else got
+
+
+def _hashable(x) -> bool:
+    try:
+        hash(x)
+    except TypeError:
+        return False
+    return True
+
 
 def apply_effects(model, sig: dict, effects) -> dict:
     s = sig.copy()
-    for e in effects:
-        s = e.transform_inputs(s, model)
-    for e in effects:
-        s = e.transform_state(s, model)
+    memo = _memo(sig, "transform", 64)
+    for stage in ("transform_inputs", "transform_state"):
+        for e in effects:
+            fn = getattr(e, stage)
+            if memo is None or not _hashable(e):
+                s = fn(s, model)
+                continue
+            key = (stage, id(model), e, _ident(s))
+            got = memo.get(key)
+            if got is None:
+                got = fn(s, model)
+                if got is not s:   # a transform (not the identity): kept for the next fit
+                    memo.put(key, (model, e, tuple(s.values())), got)
+            s = got
+    if memo is not None and effects:   # a copy of its own, as without the memo
+        out = sig.copy()
+        out.clear()
+        out.update(s)
+        s = out
     return s
 
 
+class _Columns:
+    """Low-passed columns of one record (parallel filtering), found by content: a slot per
+    (equation, column, filter) holds the last used (source, filtered, id) entries; a source is
+    matched by identity, else by equal values. Equal ids mean equal content (the signatures
+    :func:`fit` compares to take a block over from an earlier fit)."""
+
+    PER_SLOT = 48   # a 1-D search's points and the current model's column (least recently used out)
+    PROBES = 4
+
+    def __init__(self):
+        self.slots: dict = {}
+        self.count = 0
+
+    def _probes(self, a) -> list:
+        n = a.shape[0]
+        return [a.item(i * (n - 1) // (self.PROBES - 1)) for i in range(self.PROBES)]
+
+    def find(self, slot, a):
+        entries = self.slots.get(slot)
+        if not entries:
+            return None
+        i = next((i for i, e in enumerate(entries) if e[0] is a), None)
+        if i is None:
+            probes = self._probes(a)
+            i = next((i for i, e in enumerate(entries)
+                      if e[3] == probes and np.array_equal(e[0], a)), None)
+        if i is None:
+            return None
+        hit = entries[i]
+        if i != len(entries) - 1:   # most recently used last
+            del entries[i]
+            entries.append(hit)
+        return hit
+
+    def add(self, slot, a, filtered):
+        self.count += 1
+        e = (a, filtered, self.count, self._probes(a))
+        entries = self.slots.setdefault(slot, [])
+        entries.append(e)
+        if len(entries) > self.PER_SLOT:
+            del entries[0]
+        return e
+
+
 def design(model, sig: dict, effects=()) -> tuple[dict, dict]:
-    """The transformed signals and ``{equation: (y, {parameter: column})}`` with effects added."""
+    """The transformed signals and ``{equation: (y, {parameter: column})}`` with effects added.
+
+    The model's equations, each effect's columns and the low-passed columns are kept per
+    record (``sig.cache``) and found again by the identity of the signals they came from
+    (:class:`Memo`), the low-passed ones by content (:class:`_Columns`): a structure search
+    re-fits the same columns many times."""
     s = apply_effects(model, sig, effects)
-    eqs = {k: (y, dict(cols)) for k, (y, cols) in model.equations(s).items()}
+    key = _ident(s)
+    held = (model, tuple(s.values()))
+    eqs0 = _cached(_memo(sig, "equations", 32), (id(model), key), held,
+                   lambda: model.equations(s))
+    eqs = {k: (y, dict(cols)) for k, (y, cols) in eqs0.items()}
+    memo = _memo(sig, "regressors", 256)
     for e in effects:
-        for eq, cols in e.regressors(s, model).items():
+        cols_e = _cached(memo if _hashable(e) else None, (id(model), e, key), (held, e),
+                         lambda: e.regressors(s, model))
+        for eq, cols in cols_e.items():
             if eq not in eqs:
                 raise ValueError(f"effects: {e.key} adds to unknown equation {eq!r}")
             eqs[eq][1].update(cols)
     if getattr(model, "parallel_filter", False) and "filter" in s:
         n = np.asarray(s["t"]).size
-        cache = sig.cache.setdefault("lowpass", {}) if hasattr(sig, "cache") else {}
+        cache = sig.cache.get("lowpass") if hasattr(sig, "cache") else None
+        if not isinstance(cache, _Columns):
+            cache = _Columns()
+            if hasattr(sig, "cache"):
+                sig.cache["lowpass"] = cache
         out, sigs = {}, {}
         for eq, (y, cols) in eqs.items():
             f = model.equation_filter(eq, s)
             names = ["__y"] + list(cols)
-            arrs = [np.broadcast_to(np.asarray(c, dtype=float), (n,))
-                    for c in [y] + list(cols.values())]
-            keys = [(eq, nm, f.cutoff_hz, hash(a.tobytes())) for nm, a in zip(names, arrs)]
-            todo = [i for i, key in enumerate(keys) if key not in cache]
+            arrs = [np.broadcast_to(np.asarray(c, dtype=float), (n,)) if not (
+                isinstance(c, np.ndarray) and c.dtype == float and c.shape == (n,)) else c
+                for c in [y] + list(cols.values())]
+            slots = [(eq, nm, f) for nm in names]
+            got = [cache.find(slot, a) for slot, a in zip(slots, arrs)]
+            todo = [i for i, g in enumerate(got) if g is None]
             if todo:
                 filtered = f.lowpass(np.column_stack([arrs[i] for i in todo]), s["dt"])
-                if len(cache) > 4000:
-                    cache.clear()
                 for j, i in enumerate(todo):
-                    cache[keys[i]] = filtered[:, j]
-            got = [cache[key] for key in keys]
-            out[eq] = (got[0], dict(zip(names[1:], got[1:])))
-            sigs[eq] = tuple(keys)
+                    got[i] = cache.add(slots[i], arrs[i], filtered[:, j])
+            out[eq] = (got[0][1], dict(zip(names[1:], (g[1] for g in got[1:]))))
+            sigs[eq] = tuple((nm, g[2]) for nm, g in zip(names, got))
         eqs = out
         if hasattr(s, "signatures"):
             s.signatures = sigs
@@ -219,6 +310,10 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None,
     bounds = dict(getattr(model, "bounds", {}) or {})
     for e in effects:
         bounds.update(e.bounds())
+    gram = None
+    if sigs is not None and use is None:   # Gram matrices kept by the rows and column ids
+        gram = (_memo(sig, "gram", 96), (keep.start, keep.stop) if isinstance(keep, slice)
+                else (keep.size, hash(keep.tobytes())), keep)
     for comp in _components(eqs, est):
         if (sigs is not None and bsigs is not None and isinstance(base.keep, slice)
                 and base.keep == keep
@@ -246,15 +341,13 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None,
                 if p in model.fixed:
                     y -= model.fixed[p] * np.asarray(c, dtype=float)[keep]
             ps = [p for p in cols if p in index]
-            X = np.empty((y.size, len(ps)))
-            for j, p in enumerate(ps):
-                X[:, j] = np.broadcast_to(np.asarray(cols[p], dtype=float), (n,))[keep]
-            if not (np.all(np.isfinite(X)) and np.all(np.isfinite(y))):
+            X, XtX = _columns(eq, ps, cols, n, keep, y.size, use, sigs, gram)
+            if not np.all(np.isfinite(y)):
                 raise ValueError("signals: the regressors contain NaN or Inf")
             ix = np.array([index[p] for p in ps], dtype=int)
             w2 = weights.get(eq, 1.0) ** 2
             Xu, yu = (X, y) if use is None else (X[use], y[use])
-            A[np.ix_(ix, ix)] += w2 * np.einsum("ij,ik->jk", Xu, Xu)
+            A[np.ix_(ix, ix)] += w2 * XtX
             b[ix] += w2 * np.einsum("ij,i->j", Xu, yu)
             blocks.append((eq, y, X, ix))
         scale = np.sqrt(np.diag(A)).copy()
@@ -294,6 +387,29 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None,
     return Fit(model, effects, theta, est, resid, refs, s, keep, max(conds) if conds else 1.0,
                {eq: [p for p in cols if p in est] for eq, (_, cols) in eqs.items()}, weights,
                std, violations, unconstrained)
+
+
+def _columns(eq, ps, cols, n, keep, rows, use, sigs, gram) -> tuple:
+    """An equation's estimated columns over the kept rows and their Gram matrix (over the rows
+    in use); with ``gram`` = (a :class:`Memo`, the rows' key, the rows) kept by the rows and
+    the columns' content ids (``sigs``)."""
+    key = None
+    if gram is not None and gram[0] is not None:
+        ids = dict(sigs[eq])
+        key = (eq, tuple((p, ids[p]) for p in ps)) + gram[1]
+        got = gram[0].get(key)
+        if got is not None and (isinstance(keep, slice) or np.array_equal(got[2], keep)):
+            return got[:2]
+    X = np.empty((rows, len(ps)))
+    for j, p in enumerate(ps):
+        X[:, j] = np.broadcast_to(np.asarray(cols[p], dtype=float), (n,))[keep]
+    if not np.all(np.isfinite(X)):
+        raise ValueError("signals: the regressors contain NaN or Inf")
+    Xu = X if use is None else X[use]
+    out = (X, np.einsum("ij,ik->jk", Xu, Xu))
+    if key is not None:
+        gram[0].put(key, (), out + (gram[2],))
+    return out
 
 
 def _bounded(blocks, weights, k, scale, lo, hi) -> np.ndarray:
