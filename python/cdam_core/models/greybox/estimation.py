@@ -310,10 +310,12 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None,
     bounds = dict(getattr(model, "bounds", {}) or {})
     for e in effects:
         bounds.update(e.bounds())
-    gram = None
-    if sigs is not None and use is None:   # Gram matrices kept by the rows and column ids
-        gram = (_memo(sig, "gram", 96), (keep.start, keep.stop) if isinstance(keep, slice)
-                else (keep.size, hash(keep.tobytes())), keep)
+    gram = solved = None
+    if sigs is not None and use is None:   # kept by the rows and the columns' content ids
+        rows_key = (keep.start, keep.stop) if isinstance(keep, slice) \
+            else (keep.size, hash(keep.tobytes()))
+        gram = (_memo(sig, "gram", 96), rows_key, keep)
+        solved = _memo(sig, "blocks", 256)
     for comp in _components(eqs, est):
         if (sigs is not None and bsigs is not None and isinstance(base.keep, slice)
                 and base.keep == keep
@@ -329,6 +331,23 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None,
                         violations.append(p)
             continue
         ps_all = [p for p in est if any(p in eqs[eq][1] for eq in comp)]
+        key = None
+        if solved is not None:   # the same block solved by an earlier fit on this record
+            key = (tuple((eq, sigs[eq], weights.get(eq, 1.0)) for eq in comp), rows_key,
+                   tuple((p, model.fixed[p]) for eq in comp for p in eqs[eq][1]
+                         if p in model.fixed),
+                   tuple(bounds.get(p) for p in ps_all), bool(bounded))
+            got = solved.get(key)
+            if got is not None and (isinstance(keep, slice) or np.array_equal(got[0], keep)):
+                _, th_b, res_b, std_b, cond_b, bad_b, unc_b = got
+                unconstrained.update(unc_b)
+                violations += bad_b
+                if cond_b is not None:
+                    conds.append(cond_b)
+                theta.update(th_b)
+                resid.update(res_b)
+                std.update(std_b)
+                continue
         index = {p: j for j, p in enumerate(ps_all)}
         k = len(ps_all)
         A = np.zeros((k, k))
@@ -361,14 +380,17 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None,
         tol = 1e-9 * float(np.max(np.abs(th * scale))) if k else 0.0
         bad = [p for j, p in enumerate(ps_all)
                if (lo[j] - th[j]) * scale[j] > tol or (th[j] - hi[j]) * scale[j] > tol]
-        unconstrained.update({p: float(th[index[p]]) for p in bad})
+        unc_b = {p: float(th[index[p]]) for p in bad}
+        unconstrained.update(unc_b)
         violations += bad
         if bad and bounded:   # refit this block with the bounds (bounded linear least squares)
             th = _bounded([(eq, y, X, ix) if use is None else (eq, y[use], X[use], ix)
                            for eq, y, X, ix in blocks], weights, k, scale, lo, hi)
+        cond_b = None
         if k:
             sv = np.sqrt(np.maximum(np.linalg.eigvalsh(As)[::-1], 0.0))
-            conds.append(float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf"))
+            cond_b = float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf")
+            conds.append(cond_b)
         theta.update(zip(ps_all, map(float, th)))
         wsse, rows = 0.0, 0
         for eq, y, X, ix in blocks:
@@ -380,6 +402,10 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None,
         for j, p in enumerate(ps_all):   # at an active bound the covariance formula does not hold
             if bad and bounded and (th[j] <= lo[j] or th[j] >= hi[j]):
                 std[p] = float("nan")
+        if key is not None:
+            solved.put(key, (), (keep, {p: theta[p] for p in ps_all},
+                                 {eq: resid[eq] for eq in comp}, {p: std[p] for p in ps_all},
+                                 cond_b, list(bad), unc_b))
     if base is not None and len(conds) < len(_components(eqs, est)):
         conds.append(base.cond)
     resid = {eq: resid[eq] for eq in eqs}
