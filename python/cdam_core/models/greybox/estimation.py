@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from cdam_core.models.greybox.declared import identity as _ident, memo as _memo
+from cdam_core.models.greybox.effects import Effect
 
 
 def _cached(memo, key, held, compute):
@@ -42,6 +43,8 @@ def apply_effects(model, sig: dict, effects) -> dict:
     for stage in ("transform_inputs", "transform_state"):
         for e in effects:
             fn = getattr(e, stage)
+            if getattr(type(e), stage, None) is getattr(Effect, stage):
+                continue   # the identity: the effect only adds columns
             if memo is None or not _hashable(e):
                 s = fn(s, model)
                 continue
@@ -66,7 +69,7 @@ class _Columns:
     matched by identity, else by equal values. Equal ids mean equal content (the signatures
     :func:`fit` compares to take a block over from an earlier fit)."""
 
-    PER_SLOT = 48   # a 1-D search's points and the current model's column (least recently used out)
+    PER_SLOT = 32   # a 1-D search's points and the current model's column (least recently used out)
     PROBES = 4
 
     def __init__(self):
@@ -314,7 +317,7 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None,
     if sigs is not None and use is None:   # kept by the rows and the columns' content ids
         rows_key = (keep.start, keep.stop) if isinstance(keep, slice) \
             else (keep.size, hash(keep.tobytes()))
-        gram = (_memo(sig, "gram", 96), rows_key, keep)
+        gram = (_memo(sig, "gram", 64), rows_key, keep)
         solved = _memo(sig, "blocks", 256)
     for comp in _components(eqs, est):
         if (sigs is not None and bsigs is not None and isinstance(base.keep, slice)
