@@ -184,17 +184,26 @@ class Fit:
     # (then refitted with the bounds: ``unconstrained`` holds the first estimates)
     violations: list = field(default_factory=list)
     unconstrained: dict = field(default_factory=dict)
+    # sums of squares already formed: id(array) -> (array, sum); a structure search asks the
+    # current fit for them once per candidate (residual arrays are never changed in place)
+    _squares: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    def _sq(self, a) -> float:
+        hit = self._squares.get(id(a))
+        if hit is None or hit[0] is not a:
+            hit = self._squares[id(a)] = (a, np.sum(a ** 2))
+        return hit[1]
 
     def wsse(self, equations=None) -> float:
         """Weighted sum of squared residuals over ``equations`` (default: all)."""
         eqs = self.residuals if equations is None else equations
-        return float(sum(self.weights.get(e, 1.0) ** 2 * np.sum(self.residuals[e] ** 2)
+        return float(sum(self.weights.get(e, 1.0) ** 2 * self._sq(self.residuals[e])
                          for e in eqs))
 
     def wref(self, equations=None) -> float:
         """Weighted sum of squares of the reference signals over ``equations``."""
         eqs = self.references if equations is None else equations
-        return float(sum(self.weights.get(e, 1.0) ** 2 * np.sum(self.references[e] ** 2)
+        return float(sum(self.weights.get(e, 1.0) ** 2 * self._sq(self.references[e])
                          for e in eqs))
 
     @property
