@@ -14,6 +14,7 @@ Euler, ``substeps`` per sample chosen so that h * |lambda|max <= 0.5 for the lin
 """
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -72,9 +73,10 @@ class _Columns:
     PER_SLOT = 32   # a 1-D search's points and the current model's column (least recently used out)
     PROBES = 4
 
+    _ids = itertools.count(1)   # content ids unique in the process (a base from any record)
+
     def __init__(self):
         self.slots: dict = {}
-        self.count = 0
 
     def _probes(self, a) -> list:
         n = a.shape[0]
@@ -98,8 +100,7 @@ class _Columns:
         return hit
 
     def add(self, slot, a, filtered):
-        self.count += 1
-        e = (a, filtered, self.count, self._probes(a))
+        e = (a, filtered, next(self._ids), self._probes(a))
         entries = self.slots.setdefault(slot, [])
         entries.append(e)
         if len(entries) > self.PER_SLOT:
