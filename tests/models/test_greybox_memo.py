@@ -63,13 +63,14 @@ def _same(a, b):
 def test_cached_fits_equal_uncached_fits(flight):
     m, sig = flight
     plain = dict(sig)   # a plain dict: no cache at all
-    for bounded in (False, True):
-        for effects, rows in _cases() * 2:   # twice: the second round reuses everything
-            warm = fit(m, sig, effects, TRIM, bounded=bounded, rows=rows)
-            cold_sig = sig.copy()
-            cold_sig.cache = {}
-            _same(warm, fit(m, cold_sig, effects, TRIM, bounded=bounded, rows=rows))
-            _same(warm, fit(m, plain, effects, TRIM, bounded=bounded, rows=rows))
+    # unconstrained twice (the second round reuses everything), then with the bounds
+    for bounded, (effects, rows) in ([(False, c) for c in _cases() * 2]
+                                     + [(True, c) for c in _cases()]):
+        warm = fit(m, sig, effects, TRIM, bounded=bounded, rows=rows)
+        cold_sig = sig.copy()
+        cold_sig.cache = {}
+        _same(warm, fit(m, cold_sig, effects, TRIM, bounded=bounded, rows=rows))
+        _same(warm, fit(m, plain, effects, TRIM, bounded=bounded, rows=rows))
     assert sig.cache["blocks"].items, "the warm record kept no solved block"
 
 
