@@ -8,6 +8,7 @@ EMPS benchmark's IDIM-LS scripts) followed by central differences (``numpy.gradi
 """
 from __future__ import annotations
 
+from collections import OrderedDict
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -121,6 +122,59 @@ class Signals(dict):
         out = Signals(self)
         out.weights, out.cache, out.signatures = self.weights, self.cache, self.signatures
         return out
+
+
+class Memo:
+    """The last ``size`` results computed from one record's arrays, found by the identity of
+    those arrays (:func:`identity`). Each entry holds the objects its key names, so an id is not
+    reused while the entry lives. Prepared signals are never changed in place (effects and
+    fits work on copies), so the same objects give the same result."""
+
+    def __init__(self, size: int):
+        self.size = size
+        self.items: OrderedDict = OrderedDict()
+
+    def get(self, key):
+        hit = self.items.get(key)
+        if hit is None:
+            return None
+        self.items.move_to_end(key)
+        return hit[1]
+
+    def put(self, key, held, value):
+        self.items[key] = (held, value)
+        if len(self.items) > self.size:
+            self.items.popitem(last=False)
+        return value
+
+
+def identity(s: dict) -> tuple:
+    """The identity of a signals dict: its keys and the objects they hold."""
+    return tuple((k, id(v)) for k, v in s.items())
+
+
+def memo(sig, name: str, size: int):
+    """The :class:`Memo` named ``name`` in the record's cache (None for a plain dict)."""
+    cache = getattr(sig, "cache", None)
+    if not isinstance(cache, dict):
+        return None
+    m = cache.get(name)
+    if m is None:
+        m = cache[name] = Memo(size)
+    return m
+
+
+def derived(s: dict, name: str, keys: tuple, compute):
+    """``compute()``, a function of the whole-record signals ``s[k]`` for ``k`` in ``keys``,
+    kept in the record's cache while those are the same arrays (effects replace the signals
+    they change; the model's equations ask for the same products at every fit). A plain dict
+    or a state of a few samples: computed every time."""
+    m = memo(s, "derived", 64)
+    if m is None or not all(isinstance(s.get(k), np.ndarray) for k in keys):
+        return compute()
+    key = (name,) + tuple(id(s[k]) for k in keys)
+    got = m.get(key)
+    return m.put(key, tuple(s[k] for k in keys), compute()) if got is None else got
 
 
 class GreyBoxModel:

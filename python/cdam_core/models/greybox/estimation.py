@@ -14,49 +14,144 @@ Euler, ``substeps`` per sample chosen so that h * |lambda|max <= 0.5 for the lin
 """
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from cdam_core.models.greybox.declared import identity as _ident, memo as _memo
+from cdam_core.models.greybox.effects import Effect
+
+
+def _cached(memo, key, held, compute):
+    if memo is None:
+        return compute()
+    got = memo.get(key)
+    return memo.put(key, held, compute()) if got is None else got
+
+
+def _hashable(x) -> bool:
+    try:
+        hash(x)
+    except TypeError:
+        return False
+    return True
+
 
 def apply_effects(model, sig: dict, effects) -> dict:
     s = sig.copy()
-    for e in effects:
-        s = e.transform_inputs(s, model)
-    for e in effects:
-        s = e.transform_state(s, model)
+    memo = _memo(sig, "transform", 64)
+    for stage in ("transform_inputs", "transform_state"):
+        for e in effects:
+            fn = getattr(e, stage)
+            if getattr(type(e), stage, None) is getattr(Effect, stage):
+                continue   # the identity: the effect only adds columns
+            if memo is None or not _hashable(e):
+                s = fn(s, model)
+                continue
+            key = (stage, id(model), e, _ident(s))
+            got = memo.get(key)
+            if got is None:
+                got = fn(s, model)
+                if got is not s:   # a transform (not the identity): kept for the next fit
+                    memo.put(key, (model, e, tuple(s.values())), got)
+            s = got
+    if memo is not None and effects:   # a copy of its own, as without the memo
+        out = sig.copy()
+        out.clear()
+        out.update(s)
+        s = out
     return s
 
 
+class _Columns:
+    """Low-passed columns of one record (parallel filtering), found by content: a slot per
+    (equation, column, filter) holds the last used (source, filtered, id) entries; a source is
+    matched by identity, else by equal values. Equal ids mean equal content (the signatures
+    :func:`fit` compares to take a block over from an earlier fit)."""
+
+    PER_SLOT = 32   # a 1-D search's points and the current model's column (least recently used out)
+    PROBES = 4
+
+    _ids = itertools.count(1)   # content ids unique in the process (a base from any record)
+
+    def __init__(self):
+        self.slots: dict = {}
+
+    def _probes(self, a) -> list:
+        n = a.shape[0]
+        return [a.item(i * (n - 1) // (self.PROBES - 1)) for i in range(self.PROBES)]
+
+    def find(self, slot, a):
+        entries = self.slots.get(slot)
+        if not entries:
+            return None
+        i = next((i for i, e in enumerate(entries) if e[0] is a), None)
+        if i is None:
+            probes = self._probes(a)
+            i = next((i for i, e in enumerate(entries)
+                      if e[3] == probes and np.array_equal(e[0], a)), None)
+        if i is None:
+            return None
+        hit = entries[i]
+        if i != len(entries) - 1:   # most recently used last
+            del entries[i]
+            entries.append(hit)
+        return hit
+
+    def add(self, slot, a, filtered):
+        e = (a, filtered, next(self._ids), self._probes(a))
+        entries = self.slots.setdefault(slot, [])
+        entries.append(e)
+        if len(entries) > self.PER_SLOT:
+            del entries[0]
+        return e
+
+
 def design(model, sig: dict, effects=()) -> tuple[dict, dict]:
-    """The transformed signals and ``{equation: (y, {parameter: column})}`` with effects added."""
+    """The transformed signals and ``{equation: (y, {parameter: column})}`` with effects added.
+
+    The model's equations, each effect's columns and the low-passed columns are kept per
+    record (``sig.cache``) and found again by the identity of the signals they came from
+    (:class:`Memo`), the low-passed ones by content (:class:`_Columns`): a structure search
+    re-fits the same columns many times."""
     s = apply_effects(model, sig, effects)
-    eqs = {k: (y, dict(cols)) for k, (y, cols) in model.equations(s).items()}
+    key = _ident(s)
+    held = (model, tuple(s.values()))
+    eqs0 = _cached(_memo(sig, "equations", 32), (id(model), key), held,
+                   lambda: model.equations(s))
+    eqs = {k: (y, dict(cols)) for k, (y, cols) in eqs0.items()}
+    memo = _memo(sig, "regressors", 256)
     for e in effects:
-        for eq, cols in e.regressors(s, model).items():
+        cols_e = _cached(memo if _hashable(e) else None, (id(model), e, key), (held, e),
+                         lambda: e.regressors(s, model))
+        for eq, cols in cols_e.items():
             if eq not in eqs:
                 raise ValueError(f"effects: {e.key} adds to unknown equation {eq!r}")
             eqs[eq][1].update(cols)
     if getattr(model, "parallel_filter", False) and "filter" in s:
         n = np.asarray(s["t"]).size
-        cache = sig.cache.setdefault("lowpass", {}) if hasattr(sig, "cache") else {}
+        cache = sig.cache.get("lowpass") if hasattr(sig, "cache") else None
+        if not isinstance(cache, _Columns):
+            cache = _Columns()
+            if hasattr(sig, "cache"):
+                sig.cache["lowpass"] = cache
         out, sigs = {}, {}
         for eq, (y, cols) in eqs.items():
             f = model.equation_filter(eq, s)
             names = ["__y"] + list(cols)
-            arrs = [np.broadcast_to(np.asarray(c, dtype=float), (n,))
-                    for c in [y] + list(cols.values())]
-            keys = [(eq, nm, f.cutoff_hz, hash(a.tobytes())) for nm, a in zip(names, arrs)]
-            todo = [i for i, key in enumerate(keys) if key not in cache]
+            arrs = [np.broadcast_to(np.asarray(c, dtype=float), (n,)) if not (
+                isinstance(c, np.ndarray) and c.dtype == float and c.shape == (n,)) else c
+                for c in [y] + list(cols.values())]
+            slots = [(eq, nm, f) for nm in names]
+            got = [cache.find(slot, a) for slot, a in zip(slots, arrs)]
+            todo = [i for i, g in enumerate(got) if g is None]
             if todo:
                 filtered = f.lowpass(np.column_stack([arrs[i] for i in todo]), s["dt"])
-                if len(cache) > 4000:
-                    cache.clear()
                 for j, i in enumerate(todo):
-                    cache[keys[i]] = filtered[:, j]
-            got = [cache[key] for key in keys]
-            out[eq] = (got[0], dict(zip(names[1:], got[1:])))
-            sigs[eq] = tuple(keys)
+                    got[i] = cache.add(slots[i], arrs[i], filtered[:, j])
+            out[eq] = (got[0][1], dict(zip(names[1:], (g[1] for g in got[1:]))))
+            sigs[eq] = tuple((nm, g[2]) for nm, g in zip(names, got))
         eqs = out
         if hasattr(s, "signatures"):
             s.signatures = sigs
@@ -90,17 +185,26 @@ class Fit:
     # (then refitted with the bounds: ``unconstrained`` holds the first estimates)
     violations: list = field(default_factory=list)
     unconstrained: dict = field(default_factory=dict)
+    # sums of squares already formed: id(array) -> (array, sum); a structure search asks the
+    # current fit for them once per candidate (residual arrays are never changed in place)
+    _squares: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    def _sq(self, a) -> float:
+        hit = self._squares.get(id(a))
+        if hit is None or hit[0] is not a:
+            hit = self._squares[id(a)] = (a, np.sum(a ** 2))
+        return hit[1]
 
     def wsse(self, equations=None) -> float:
         """Weighted sum of squared residuals over ``equations`` (default: all)."""
         eqs = self.residuals if equations is None else equations
-        return float(sum(self.weights.get(e, 1.0) ** 2 * np.sum(self.residuals[e] ** 2)
+        return float(sum(self.weights.get(e, 1.0) ** 2 * self._sq(self.residuals[e])
                          for e in eqs))
 
     def wref(self, equations=None) -> float:
         """Weighted sum of squares of the reference signals over ``equations``."""
         eqs = self.references if equations is None else equations
-        return float(sum(self.weights.get(e, 1.0) ** 2 * np.sum(self.references[e] ** 2)
+        return float(sum(self.weights.get(e, 1.0) ** 2 * self._sq(self.references[e])
                          for e in eqs))
 
     @property
@@ -219,6 +323,12 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None,
     bounds = dict(getattr(model, "bounds", {}) or {})
     for e in effects:
         bounds.update(e.bounds())
+    gram = solved = None
+    if sigs is not None and use is None:   # kept by the rows and the columns' content ids
+        rows_key = (keep.start, keep.stop) if isinstance(keep, slice) \
+            else (keep.size, hash(keep.tobytes()))
+        gram = (_memo(sig, "gram", 64), rows_key, keep)
+        solved = _memo(sig, "blocks", 256)
     for comp in _components(eqs, est):
         if (sigs is not None and bsigs is not None and isinstance(base.keep, slice)
                 and base.keep == keep
@@ -234,6 +344,23 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None,
                         violations.append(p)
             continue
         ps_all = [p for p in est if any(p in eqs[eq][1] for eq in comp)]
+        key = None
+        if solved is not None:   # the same block solved by an earlier fit on this record
+            key = (tuple((eq, sigs[eq], weights.get(eq, 1.0)) for eq in comp), rows_key,
+                   tuple((p, model.fixed[p]) for eq in comp for p in eqs[eq][1]
+                         if p in model.fixed),
+                   tuple(bounds.get(p) for p in ps_all), bool(bounded))
+            got = solved.get(key)
+            if got is not None and (isinstance(keep, slice) or np.array_equal(got[0], keep)):
+                _, th_b, res_b, std_b, cond_b, bad_b, unc_b = got
+                unconstrained.update(unc_b)
+                violations += bad_b
+                if cond_b is not None:
+                    conds.append(cond_b)
+                theta.update(th_b)
+                resid.update(res_b)
+                std.update(std_b)
+                continue
         index = {p: j for j, p in enumerate(ps_all)}
         k = len(ps_all)
         A = np.zeros((k, k))
@@ -246,15 +373,13 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None,
                 if p in model.fixed:
                     y -= model.fixed[p] * np.asarray(c, dtype=float)[keep]
             ps = [p for p in cols if p in index]
-            X = np.empty((y.size, len(ps)))
-            for j, p in enumerate(ps):
-                X[:, j] = np.broadcast_to(np.asarray(cols[p], dtype=float), (n,))[keep]
-            if not (np.all(np.isfinite(X)) and np.all(np.isfinite(y))):
+            X, XtX = _columns(eq, ps, cols, n, keep, y.size, use, sigs, gram)
+            if not np.all(np.isfinite(y)):
                 raise ValueError("signals: the regressors contain NaN or Inf")
             ix = np.array([index[p] for p in ps], dtype=int)
             w2 = weights.get(eq, 1.0) ** 2
             Xu, yu = (X, y) if use is None else (X[use], y[use])
-            A[np.ix_(ix, ix)] += w2 * np.einsum("ij,ik->jk", Xu, Xu)
+            A[np.ix_(ix, ix)] += w2 * XtX
             b[ix] += w2 * np.einsum("ij,i->j", Xu, yu)
             blocks.append((eq, y, X, ix))
         scale = np.sqrt(np.diag(A)).copy()
@@ -268,14 +393,17 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None,
         tol = 1e-9 * float(np.max(np.abs(th * scale))) if k else 0.0
         bad = [p for j, p in enumerate(ps_all)
                if (lo[j] - th[j]) * scale[j] > tol or (th[j] - hi[j]) * scale[j] > tol]
-        unconstrained.update({p: float(th[index[p]]) for p in bad})
+        unc_b = {p: float(th[index[p]]) for p in bad}
+        unconstrained.update(unc_b)
         violations += bad
         if bad and bounded:   # refit this block with the bounds (bounded linear least squares)
             th = _bounded([(eq, y, X, ix) if use is None else (eq, y[use], X[use], ix)
                            for eq, y, X, ix in blocks], weights, k, scale, lo, hi)
+        cond_b = None
         if k:
             sv = np.sqrt(np.maximum(np.linalg.eigvalsh(As)[::-1], 0.0))
-            conds.append(float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf"))
+            cond_b = float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf")
+            conds.append(cond_b)
         theta.update(zip(ps_all, map(float, th)))
         wsse, rows = 0.0, 0
         for eq, y, X, ix in blocks:
@@ -287,6 +415,10 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None,
         for j, p in enumerate(ps_all):   # at an active bound the covariance formula does not hold
             if bad and bounded and (th[j] <= lo[j] or th[j] >= hi[j]):
                 std[p] = float("nan")
+        if key is not None:
+            solved.put(key, (), (keep, {p: theta[p] for p in ps_all},
+                                 {eq: resid[eq] for eq in comp}, {p: std[p] for p in ps_all},
+                                 cond_b, list(bad), unc_b))
     if base is not None and len(conds) < len(_components(eqs, est)):
         conds.append(base.cond)
     resid = {eq: resid[eq] for eq in eqs}
@@ -294,6 +426,29 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None,
     return Fit(model, effects, theta, est, resid, refs, s, keep, max(conds) if conds else 1.0,
                {eq: [p for p in cols if p in est] for eq, (_, cols) in eqs.items()}, weights,
                std, violations, unconstrained)
+
+
+def _columns(eq, ps, cols, n, keep, rows, use, sigs, gram) -> tuple:
+    """An equation's estimated columns over the kept rows and their Gram matrix (over the rows
+    in use); with ``gram`` = (a :class:`Memo`, the rows' key, the rows) kept by the rows and
+    the columns' content ids (``sigs``)."""
+    key = None
+    if gram is not None and gram[0] is not None:
+        ids = dict(sigs[eq])
+        key = (eq, tuple((p, ids[p]) for p in ps)) + gram[1]
+        got = gram[0].get(key)
+        if got is not None and (isinstance(keep, slice) or np.array_equal(got[2], keep)):
+            return got[:2]
+    X = np.empty((rows, len(ps)))
+    for j, p in enumerate(ps):
+        X[:, j] = np.broadcast_to(np.asarray(cols[p], dtype=float), (n,))[keep]
+    if not np.all(np.isfinite(X)):
+        raise ValueError("signals: the regressors contain NaN or Inf")
+    Xu = X if use is None else X[use]
+    out = (X, np.einsum("ij,ik->jk", Xu, Xu))
+    if key is not None:
+        gram[0].put(key, (), out + (gram[2],))
+    return out
 
 
 def _bounded(blocks, weights, k, scale, lo, hi) -> np.ndarray:

@@ -54,7 +54,7 @@ from __future__ import annotations
 import numpy as np
 
 from cdam_core.base.signals import as_signal
-from cdam_core.models.greybox.declared import DerivativeFilter, GreyBoxModel
+from cdam_core.models.greybox.declared import DerivativeFilter, GreyBoxModel, derived
 
 G0 = 9.81
 QUAD_INPUTS = ("T", "tau_phi", "tau_theta", "tau_psi")
@@ -63,6 +63,10 @@ QUAD_POSITIONS = ("phi", "theta", "psi", "X", "Y", "Z")
 
 def thrust_direction(s: dict):
     """World components of the body z axis (Z-Y-X Euler angles), as in PAPER.md (1)."""
+    return derived(s, "thrust_direction", ("phi", "theta", "psi"), lambda: _thrust_direction(s))
+
+
+def _thrust_direction(s: dict):
     cf, sf = np.cos(s["phi"]), np.sin(s["phi"])
     ct, st = np.cos(s["theta"]), np.sin(s["theta"])
     cp, sp = np.cos(s["psi"]), np.sin(s["psi"])
@@ -149,19 +153,22 @@ class Quadrotor(GreyBoxModel):
         return s.get("filter_joint", s["filter"])
 
     def equations(self, s: dict) -> dict:
-        ux, uy, uz = thrust_direction(s)
-        T = s["T"]
+        # products of whole-record signals are kept while those signals are the same arrays
+        # (declared.derived): a structure search changes one input or one column at a time
+        fx, fy, fz = derived(s, "thrust_forces", ("T", "phi", "theta", "psi"),
+                             lambda: tuple(s["T"] * u for u in thrust_direction(s)))
         pd, td, yd = s["phi_d"], s["theta_d"], s["psi_d"]
+        zg, tyn, typ, pyn, pyp, ptn, ptp = derived(
+            s, "rate_products", ("Z_dd", "phi_d", "theta_d", "psi_d"),
+            lambda: (s["Z_dd"] + G0, -td * yd, td * yd, -pd * yd, pd * yd, -pd * td, pd * td))
         return {
-            "X": (T * ux, {"m": s["X_dd"], "Kx": s["X_d"]}),
-            "Y": (T * uy, {"m": s["Y_dd"], "Ky": s["Y_d"]}),
-            "Z": (T * uz, {"m": s["Z_dd"] + G0, "Kz": s["Z_d"]}),
-            "tau_phi": (s["tau_phi"], {"Jx": s["phi_dd"], "Jy": -td * yd, "Jz": td * yd,
-                                       "Kphi": pd}),
-            "tau_theta": (s["tau_theta"], {"Jy": s["theta_dd"], "Jz": -pd * yd, "Jx": pd * yd,
+            "X": (fx, {"m": s["X_dd"], "Kx": s["X_d"]}),
+            "Y": (fy, {"m": s["Y_dd"], "Ky": s["Y_d"]}),
+            "Z": (fz, {"m": zg, "Kz": s["Z_d"]}),
+            "tau_phi": (s["tau_phi"], {"Jx": s["phi_dd"], "Jy": tyn, "Jz": typ, "Kphi": pd}),
+            "tau_theta": (s["tau_theta"], {"Jy": s["theta_dd"], "Jz": pyn, "Jx": pyp,
                                            "Ktheta": td}),
-            "tau_psi": (s["tau_psi"], {"Jz": s["psi_dd"], "Jx": -pd * td, "Jy": pd * td,
-                                       "Kpsi": yd}),
+            "tau_psi": (s["tau_psi"], {"Jz": s["psi_dd"], "Jx": ptn, "Jy": ptp, "Kpsi": yd}),
         }
 
     def reference(self, eq: str, s: dict, theta: dict):
@@ -212,6 +219,25 @@ class AerialManipulator(Quadrotor):
 
     def equations(self, s: dict) -> dict:
         eqs = super().equations(s)
+        keys = ("q1", "q2", "q1_d", "q1_dd", "q2_d", "q2_dd", "theta_d", "theta_dd",
+                "theta_dj", "theta_ddj", "phi", "theta", "psi", "X_dd", "Y_dd", "Z_dd",
+                "X_ddj", "Y_ddj", "Z_ddj")
+        zero, l1, l2 = derived(s, f"link_columns {self.joint_depth!r}",
+                               tuple(k for k in keys if k in s), lambda: self._link_columns(s))
+        for k in (1, 2):
+            d, dd = s[f"defl{k}"], s[f"defl{k}_d"]
+            eqs[f"tau_m{k}"] = (s[f"tau_m{k}"], {f"Im{k}": s[f"theta_m{k}_dd"],
+                                                 f"Dm{k}": s[f"theta_m{k}_d"],
+                                                 f"Ks{k}": d, f"Kd{k}": dd})
+        nd1, ndd1, nd2, ndd2 = derived(
+            s, "cable_columns", ("defl1", "defl1_d", "defl2", "defl2_d"),
+            lambda: (-s["defl1"], -s["defl1_d"], -s["defl2"], -s["defl2_d"]))
+        eqs["tau_l1"] = (zero, {**l1, "Dl1": s["q1_d"], "Ks1": nd1, "Kd1": ndd1})
+        eqs["tau_l2"] = (zero, {**l2, "Dl2": s["q2_d"], "Ks2": nd2, "Kd2": ndd2})
+        return eqs
+
+    def _link_columns(self, s: dict) -> tuple:
+        """The link equations' columns that hold the arm's and the body's motion only."""
         q1, q2 = s["q1"], s["q2"]
         # link 1's absolute rates in the arm plane (the body pitches with it)
         td, tdd = s.get("theta_dj", s["theta_d"]), s.get("theta_ddj", s["theta_dd"])
@@ -220,27 +246,24 @@ class AerialManipulator(Quadrotor):
         c2, s2 = np.cos(q2), np.sin(q2)
         gx, gz = self.specific_force(s)
         zero = 0.0 * q1
-        for k in (1, 2):
-            d, dd = s[f"defl{k}"], s[f"defl{k}_d"]
-            eqs[f"tau_m{k}"] = (s[f"tau_m{k}"], {f"Im{k}": s[f"theta_m{k}_dd"],
-                                                 f"Dm{k}": s[f"theta_m{k}_d"],
-                                                 f"Ks{k}": d, f"Kd{k}": dd})
         g1 = np.sin(q1) * gz - np.cos(q1) * gx
         g2 = np.sin(q1 + q2) * gz - np.cos(q1 + q2) * gx
-        eqs["tau_l1"] = (zero, {
-            "p1": w1dd, "p3": w1dd + q2dd,
-            "p2": c2 * (2 * w1dd + q2dd) - s2 * (2 * w1 * q2d + q2d ** 2),
-            "g1": g1, "g2": g2, "Dl1": s["q1_d"],
-            "Ks1": -s["defl1"], "Kd1": -s["defl1_d"]})
-        eqs["tau_l2"] = (zero, {
-            "p3": w1dd + q2dd, "p2": c2 * w1dd + s2 * w1 ** 2, "g2": g2,
-            "Dl2": q2d, "Ks2": -s["defl2"], "Kd2": -s["defl2_d"]})
-        return eqs
+        l1 = {"p1": w1dd, "p3": w1dd + q2dd,
+              "p2": c2 * (2 * w1dd + q2dd) - s2 * (2 * w1 * q2d + q2d ** 2),
+              "g1": g1, "g2": g2}
+        l2 = {"p3": w1dd + q2dd, "p2": c2 * w1dd + s2 * w1 ** 2, "g2": g2}
+        return zero, l1, l2
 
     def specific_force(self, s: dict):
         """Body-frame x and z specific force at joint 1 over g: (R^T (p'' + g e_z) + the
         joint's acceleration from the body's pitch, (-d theta'', d theta'^2)) / g; 'gravity' as
         the swinging links feel it (0, 1 in hover)."""
+        keys = ("phi", "theta", "psi", "X_dd", "Y_dd", "Z_dd", "theta_d", "theta_dd")
+        keys += tuple(k for k in ("X_ddj", "Y_ddj", "Z_ddj", "theta_dj", "theta_ddj") if k in s)
+        return derived(s, f"specific_force {self.joint_depth!r}", keys,
+                       lambda: self._specific_force(s))
+
+    def _specific_force(self, s: dict):
         cf, sf = np.cos(s["phi"]), np.sin(s["phi"])
         ct, st = np.cos(s["theta"]), np.sin(s["theta"])
         cp, sp = np.cos(s["psi"]), np.sin(s["psi"])
