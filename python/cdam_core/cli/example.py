@@ -29,7 +29,7 @@ def emps_report(out_dir, ticker=None) -> Path:
     d, p = load_emps("DATA_EMPS"), load_emps("DATA_EMPS_PULSES")
     with ticker("the residual loop on DATA_EMPS (structure, estimator, free runs)"):
         sel = analyse("rigid_axis", d["t"], {"tau": d["force"], "q": d["qm"]},
-                      validation=(p["t"], {"tau": p["force"], "q": p["qm"]}), output_error=True)
+                      validation=(p["t"], {"tau": p["force"], "q": p["qm"]}))
     out = write_report(sel, out_dir, title="EMPS (DATA_EMPS, free run on DATA_EMPS_PULSES)",
                        source="EMPS benchmark (Janot, Gautier, Brunot 2019): force = gtau * vir, "
                               "output qm; free-run errors on DATA_EMPS_PULSES",
