@@ -308,8 +308,11 @@ def _choose_estimator(model, sig, current: Fit, cv, alpha: float, trim: int,
 def _estimator_windows(model, sig, trim, declared, current: Fit, cv):
     """The windows the estimators are compared (and output error fitted) on: ``cv``'s (RK4
     for the axis models), or semi-implicit Euler when the final model holds a plain sign (dry
-    friction, ``eps`` 0): a discontinuous right-hand side costs RK4 its order, and its stages
-    straddling the sign's flips make the window error rough in the parameters. Measured on a
+    friction, ``eps`` 0): a discontinuous right-hand side costs RK4 its order, and where the
+    motion sticks its stages cancel the sign: for |v| < h Fc / (2 M) the four stages see
+    -Fc, +Fc, -Fc, +Fc and the weights 1, 2, 2, 1 sum them to 0, so the simulated axis keeps
+    drifting at whatever small velocity it entered that band with (Euler's velocity chatters
+    about 0 instead): the window error is rough in the parameters. Measured on a
     noise-free rigid axis with dry friction, output error started 20 % off: stuck there on RK4
     windows, back to the truth within 0.5 % on Euler's; from IDIM-LS 31 % low (a 40 Hz cut-off
     on a quantised 500 Hz record): M -21 % on RK4 windows, +0.9 % on Euler's."""
