@@ -221,8 +221,8 @@ def test_output_error_chosen_where_least_squares_is_biased():
     2048-count noisy link encoder. IDIM-LS is biased by the noise of the twice-differentiated
     link angle (measured: Im -3.4 %, I +1.8 %); the output-error refinement (multiple shooting
     from the measured state, RK4 windows) predicts held-out windows better (measured p 2.6e-12
-    at level 0.005), IDIM-IV does not (p 1.0), and output error is chosen: Im -0.03 %, Ks -0.08 %,
-    I +0.01 %, Dm +0.6 %, Dl -0.2 % (Kd +4.3 %, IDIM-LS's +4.6 %)."""
+    at level 0.005), IDIM-IV does not (p 1.0), and output error is chosen: Im -0.03 %,
+    Ks -0.08 %, I +0.01 %, Dm +0.6 %, Dl -0.2 % (Kd +4.3 %, IDIM-LS's +4.6 %)."""
     r = Joint(fs=500, control="motor", link_counts=2048, link_noise=2e-4,
               motor_counts=16384).record()
     sel = analyse("flexible_joint", r["t"], {k: r[k] for k in ("tau_m", "theta_m", "q")},

@@ -260,8 +260,8 @@ def _choose_estimator(model, sig, current: Fit, cv, alpha: float, trim: int,
     estimates) only if it also predicts them better than IDIM-IV (same test; measured at a
     60 Hz cut-off on a 250 Hz link-PD record: both better than IDIM-LS, output error's windows
     8 % lower than IDIM-IV's but its Dm +119 %, Dl -18 % against IDIM-IV's within 5 %); the
-    chosen estimator is then run on the whole record. "idim-iv" or "oe": that estimator, run on the
-    whole record without a held-out comparison (the report says it was given)."""
+    chosen estimator is then run on the whole record. "idim-iv" or "oe": that estimator, run
+    on the whole record without a held-out comparison (the report says it was given)."""
     if estimator in _FORCED:
         best = _FORCED[estimator]
         out = {"chosen": "IDIM-LS", "rule": f"given ({estimator})", "validation": {}}
