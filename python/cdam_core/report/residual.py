@@ -255,7 +255,7 @@ def write_report(sel: Selection, out_dir, title: str | None = None, source: str 
         alts = "; ".join(f"{name}: mean error {v['score_rich']:.3g} against IDIM-LS's "
                          f"{v['score_simple']:.3g}, one-sided Wilcoxon p {v['p_value']:.2g} at "
                          f"level {v['level']:.2g}" for name, v in est["validation"].items())
-        how = f" ({est['windows_integrator']})" if est.get("windows_integrator") else ""
+        how = f" by {est['windows_integrator']}" if est.get("windows_integrator") else ""
         lines += ["", f"Estimator: {est['chosen']} (alternatives on held-out windows{how}: "
                       f"{alts})."]
     elif str(est.get("rule", "")).startswith("given"):
