@@ -112,7 +112,7 @@ def test_commands_run_as_written_in_a_plain_clone(clone):
     assert said == ", ".join(f"{k} {v:g}" for k, v in truth.items())
     r = _bash(repo, env, res)
     assert r.returncode == 0, r.stderr[-2000:]
-    js = json.loads((repo / "out" / "joint.json").read_text())
+    js = json.loads((repo / "out" / "joint_residual.json").read_text())
     assert "final parameters (value, relative sigma):" in r.stdout  # the summary, not the JSON
     assert (repo / "out" / "joint" / "index.html").is_file()
     cut = js["settings"]["filter_choice"]["chosen_hz"]

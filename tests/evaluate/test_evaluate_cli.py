@@ -64,8 +64,8 @@ def test_greybox_model_is_evaluated(tmp_path):
     np.savetxt(tmp_path / "r.csv", np.column_stack([rec["t"], rec["tau"], rec["q"]]),
                delimiter=",", header="t,force,pos", comments="", fmt="%.12g")
     assert main(["residual", str(tmp_path / "r.csv"), "--model", "rigid_axis", "--map",
-                 "tau=force,q=pos", "--no-free-run", "--json", str(tmp_path / "o.json"),
-                 "--save", str(tmp_path / "g.json")]) == 0
+                 "tau=force,q=pos", "--no-free-run", "--estimator", "idim-ls", "--json",
+                 str(tmp_path / "o.json"), "--save", str(tmp_path / "g.json")]) == 0
     assert main(["evaluate", str(tmp_path / "g.json"), str(tmp_path / "r.csv"), "--horizon",
                  "100", "--json", str(tmp_path / "e.json"), "--quiet"]) == 0
     js = json.loads((tmp_path / "e.json").read_text())

@@ -172,7 +172,7 @@ def test_simulated_arm_found_effect(tmp_path):
     assert main(["simulate", "--experiment", "ii", "--duration", "6", "--seed", "1",
                  "--effect", "coulomb_friction:Fc1=0.05", "-o", str(rec)]) == 0
     assert main(["residual", str(rec), "--model", "flexible_joint", "--no-free-run",
-                 "--save", str(model)]) == 0
+                 "--estimator", "idim-ls", "--save", str(model)]) == 0
     doc = json.loads(model.read_text())
     assert "coulomb_friction" in [e["name"] for e in doc["model"]["effects"]]
     out = tmp_path / "check.json"

@@ -162,6 +162,11 @@ def test_derived_seeds_come_from_the_task_alone(folder):
       "options": {"model": "rigid_axis", "alpha": 2}}, "spec.options.alpha"),
     ({"command": "residual", "records": "recs/*.csv",
       "options": {"model": "rigid_axis", "map": "tau=force"}}, "spec.options.map"),
+    ({"command": "residual", "records": "recs/*.csv",
+      "options": {"model": "rigid_axis", "estimator": "ols"}}, "spec.options.estimator"),
+    ({"command": "residual", "records": "recs/*.csv",
+      "options": {"model": "rigid_axis", "output_error": True, "estimator": "idim-ls"}},
+     "spec.options.output_error"),
 ])
 def test_bad_spec_names_the_field(folder, doc, field):
     with pytest.raises(ValueError, match=field.replace(".", r"\.")):

@@ -179,7 +179,7 @@ def test_output_error_jacobian_equals_scipy_differences(axis):
         return e if thetas is not None else e[0]
     seen = {}
 
-    def spy(fun, x0, jac, bounds, max_nfev):
+    def spy(fun, x0, jac, bounds, max_nfev, **options):
         # away from the scaled start (where every |x| = 1), M and Fv at |x| < 1
         x = x0 * (0.8 + 0.1 * np.arange(x0.size))
         seen["J"] = jac(x)

@@ -176,3 +176,26 @@ def test_map_takes_the_common_syntax_and_refuses_a_factor(tmp_path, capsys):
                  str(tmp_path / "o.json")]) == 0
     js = json.loads((tmp_path / "o.json").read_text())
     assert js["findings"][0]["effect"] == "coulomb_friction"
+
+
+def test_cli_estimator_pinned_forced_and_refused(tmp_path, capsys):
+    """--estimator idim-ls: the alternatives are not tried (said in the JSON); --estimator oe
+    forces the output-error refinement (its report in the JSON, rule "given"); --output-error,
+    its older spelling, with another estimator is refused on one line (exit 2)."""
+    rec = rigid_axis_record(seed=2, Fc=1.5, duration=6.0)
+    _csv(tmp_path / "r.csv", rec)
+    base = ["residual", str(tmp_path / "r.csv"), "--model", "rigid_axis", "--map",
+            "tau=force,q=pos", "--no-free-run", "--quiet", "--json"]
+    assert main(base + [str(tmp_path / "ls.json"), "--estimator", "idim-ls"]) == 0
+    est = json.loads((tmp_path / "ls.json").read_text())["settings"]["estimator"]
+    assert est["chosen"] == "IDIM-LS" and "not tried" in est["rule"]
+    assert main(base + [str(tmp_path / "oe.json"), "--output-error"]) == 0
+    est = json.loads((tmp_path / "oe.json").read_text())["settings"]["estimator"]
+    assert est["rule"] == "given (oe)"
+    assert est["chosen"] == "output error (multiple shooting)", est
+    assert est["refinement"]["evaluations"] >= 1
+    capsys.readouterr()
+    assert main(base + [str(tmp_path / "x.json"), "--output-error", "--estimator",
+                        "idim-iv"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["cdam residual: error: --output-error: conflicts with --estimator idim-iv"]

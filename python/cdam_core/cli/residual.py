@@ -101,7 +101,7 @@ def run(args) -> int:
                                  f"effects on {len(ds)} samples"):
         sel = analyse(args.model, ds.t, signals, extra=extra or None, cutoff_hz=args.cutoff,
                       alpha=args.alpha, free_run=not args.no_free_run, fixed=fixed or None,
-                      declared=declared, keep_terms=terms, output_error=args.output_error,
+                      declared=declared, keep_terms=terms, estimator=_estimator(args),
                       timing=args.timing)
     js = to_json(sel)
     js["source"] = str(args.data)
@@ -124,6 +124,15 @@ def run(args) -> int:
               "'unavailable' in the JSON); everything else was written", file=sys.stderr)
         return 1
     return 0
+
+
+def _estimator(args) -> str:
+    """--estimator, with --output-error its older spelling of ``oe``."""
+    if args.output_error:
+        if args.estimator not in ("auto", "oe"):
+            raise CliError(f"--output-error: conflicts with --estimator {args.estimator}")
+        return "oe"
+    return args.estimator
 
 
 def _test(args, mapping: dict, inputs: list, sel) -> dict:
@@ -244,9 +253,15 @@ def register(subparsers) -> None:
     p.add_argument("--save", help="write the final model (declared model + the effects found) "
                                   "as a greybox model file here (docs/MODEL_FILE.md)")
     p.add_argument("--report", help="write a Markdown report with PNG figures into this folder")
+    p.add_argument("--estimator", choices=("auto", "idim-ls", "idim-iv", "oe"), default="auto",
+                   help="how the final model's parameters are estimated (rigid_axis, "
+                        "flexible_joint): auto tries IDIM-IV and output error (multiple "
+                        "shooting from the IDIM-LS estimates) and keeps one only if it predicts "
+                        "held-out windows better than IDIM-LS (the choice and its p-values are "
+                        "reported); idim-ls skips them (faster); idim-iv or oe forces one "
+                        "(default: %(default)s)")
     p.add_argument("--output-error", action="store_true",
-                   help="also refine the final model by output error (multiple shooting) and "
-                        "keep it if it predicts held-out windows better than IDIM-LS (slower)")
+                   help="force the output-error refinement: the same as --estimator oe")
     p.add_argument("--cutoff", type=float, default=None,
                    help="derivative filter cutoff in Hz (default: rigid_axis and "
                         "flexible_joint choose one per position from the record, where its "

@@ -69,7 +69,8 @@ OPTIONS = {
 }
 # residual: `cdam residual`'s options ("map" and "fixed" as JSON objects, "inputs" a list)
 RESIDUAL_OPTIONS = {"model": None, "inputs": None, "outputs": None, "map": None, "fixed": None,
-                    "cutoff": None, "alpha": 0.01, "free_run": True, "output_error": False}
+                    "cutoff": None, "alpha": 0.01, "free_run": True, "estimator": "auto",
+                    "output_error": False}
 RESIDUAL_MODELS = ("rigid_axis", "flexible_joint", "quadrotor", "aerial_manipulator")
 # paper: option -> PaperConfig field (defaults: PaperConfig's, except threads: 1, as identify's
 # tasks, since the workers already fill the cores)
@@ -277,6 +278,14 @@ def _residual_options(options: dict) -> dict:
     for k in ("free_run", "output_error"):
         if not isinstance(opts[k], bool):
             raise ValueError(f"spec.options.{k}: must be true or false, got {opts[k]!r}")
+    if opts["estimator"] not in ("auto", "idim-ls", "idim-iv", "oe"):
+        raise ValueError(f"spec.options.estimator: expected auto, idim-ls, idim-iv or oe, got "
+                         f"{opts['estimator']!r}")
+    if opts["output_error"]:   # the older spelling of estimator "oe"
+        if opts["estimator"] not in ("auto", "oe"):
+            raise ValueError(f"spec.options.output_error: conflicts with estimator "
+                             f"{opts['estimator']!r}")
+        opts["estimator"] = "oe"
     return opts
 
 

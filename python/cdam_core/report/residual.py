@@ -243,8 +243,9 @@ def write_report(sel: Selection, out_dir, title: str | None = None, source: str 
     lines += ["## After", "", f"Residual white (Ljung-Box, 25 lags, 1 %): "
               f"{'yes' if sel.white_after else 'no'}.", ""]
     lines += _PARAM_HEAD + _param_rows(sel, sel.final, units)
-    lines += ["", "Standard deviations are the least-squares ones (residuals taken as white: "
-              "optimistic when they are not)."]
+    lines += ["", "Standard deviations are the chosen estimator's (IDIM-LS and IDIM-IV: from "
+              "the equations; output error: from the windows' Jacobian), errors taken as white: "
+              "optimistic when they are not."]
     dropped = sel.settings.get("declared_terms_dropped") or []
     if dropped:
         lines += ["", "Declared terms the held-out data do not support (fixed at 0): "
@@ -254,7 +255,11 @@ def write_report(sel: Selection, out_dir, title: str | None = None, source: str 
         alts = "; ".join(f"{name}: mean error {v['score_rich']:.3g} against IDIM-LS's "
                          f"{v['score_simple']:.3g}, one-sided Wilcoxon p {v['p_value']:.2g} at "
                          f"level {v['level']:.2g}" for name, v in est["validation"].items())
-        lines += ["", f"Estimator: {est['chosen']} (alternatives on held-out windows: {alts})."]
+        how = f" by {est['windows_integrator']}" if est.get("windows_integrator") else ""
+        lines += ["", f"Estimator: {est['chosen']} (alternatives on held-out windows{how}: "
+                      f"{alts})."]
+    elif str(est.get("rule", "")).startswith("given"):
+        lines += ["", f"Estimator: {est['chosen']} ({est['rule']})."]
     stab = sel.settings.get("stability") or {}
     if "stable" in stab:
         lines += ["", "Linearised at rest (effects left out): " + (
