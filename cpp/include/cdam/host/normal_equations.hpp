@@ -137,16 +137,18 @@ class NormalEquations {
     if (mode >= 1) assemble_gradient(s, *jte);
     if (mode == 2) {
       const Index P = s.C.cols(), h = net_.hidden();
-      if (s.fused) {  // S (lower triangle of each h x h block), C and R from the padded K
+      if (s.fused) {  // S from the pair sums Kh, C and R from the padded K
         const Index hs = pad4(h), nz = P / h, Pp = nz * hs;
         for (Index l = 0; l < nz; ++l) {
-          for (Index l2 = 0; l2 < l; ++l2)
-            S_.block(l * h, l2 * h, h, h) = s.K.block(l * hs, l2 * hs, h, h);
-          S_.block(l * h, l * h, h, h).template triangularView<Eigen::Lower>() =
-              s.K.block(l * hs, l * hs, h, h);
-          s.C.middleCols(l * h, h) = s.K.block(Pp, l * hs, h + 1, h);
+          for (Index l2 = 0; l2 <= l; ++l2) {
+            const Index cu = l * (l + 1) / 2 + l2;
+            for (Index j2 = 0; j2 < h; ++j2)
+              for (Index j = j2; j < h; ++j)
+                S_(l * h + j, l2 * h + j2) = s.Kh(j * (j + 1) / 2 + j2, cu);
+          }
+          s.C.middleCols(l * h, h) = s.K.block(0, l * hs, h + 1, h);
         }
-        s.R.template triangularView<Eigen::Lower>() = s.K.block(Pp, Pp, h + 1, h + 1);
+        s.R.template triangularView<Eigen::Lower>() = s.K.block(0, Pp, h + 1, h + 1);
       } else {
         S_.template triangularView<Eigen::Lower>() = s.S;
       }
@@ -170,6 +172,11 @@ class NormalEquations {
   // tiles of jtj_blocks_padded have no one-row remainders (h = 10: J'J 5.6 -> 1.8 ms, h = 20:
   // 5.6 -> 4.7 ms on 10,000 samples; the padded rows are zero and their sums never read).
   static Index pad4(Index r) { return (r + 3) / 4 * 4; }
+  // Rows of the reduced J'J's pair sums (host::jtj_reduced): the h (h + 1) / 2 products
+  // d_j d_j' padded to a multiple of 8 (whole 8 x 4 tiles), the nz (nz + 1) / 2 products
+  // z_l z_l' to a multiple of 4.
+  static Index pairs_h(Index h) { return (h * (h + 1) / 2 + 7) / 8 * 8; }
+  static Index pairs_z(Index nz) { return pad4(nz * (nz + 1) / 2); }
 
   static bool fused_path() {
     if constexpr (std::is_same<Scalar, double>::value) return host::avx2_path(host::KernelPath::Auto);
@@ -182,7 +189,8 @@ class NormalEquations {
     bool fused;
     double sse = 0.0;
     Mat gH, gO;                // h x (i+1), m x (h+1)
-    Mat S, R, C, K;            // h(i+1) sq (not fused), (h+1) sq, (h+1) x h(i+1), h(i+2)+1 sq (fused)
+    Mat S, R, C, K, Kh;        // h(i+1) sq (not fused), (h+1) sq, (h+1) x h(i+1);
+                               // fused: K pad4(h+1) x (pad4(h)(i+1) + pad4(h+1)), Kh hw x nu
 
     Slot(const Net& n_, bool fused_) : fused(fused_) {
       const Index i = n_.inputs(), h = n_.hidden(), m = n_.outputs(), P = h * (i + 1);
@@ -190,14 +198,23 @@ class NormalEquations {
       gO.resize(m, h + 1);
       R.resize(h + 1, h + 1);
       C.resize(h + 1, P);
-      if (fused) K.resize(pad4(h) * (i + 1) + pad4(h + 1), pad4(h) * (i + 1) + pad4(h + 1));
-      else S.resize(P, P);
+      if (fused) {
+        K.resize(pad4(h + 1), pad4(h) * (i + 1) + pad4(h + 1));
+        Kh.resize(pairs_h(h), pairs_z(i + 1));
+      } else {
+        S.resize(P, P);
+      }
     }
 
     void clear(int mode) {
       sse = 0.0;
       if (mode >= 1) { gH.setZero(); gO.setZero(); }
-      if (mode == 2) { R.setZero(); C.setZero(); band(fused ? K : S, [](auto c, auto) { c.setZero(); }); }
+      if (mode == 2) {
+        R.setZero();
+        C.setZero();
+        if (fused) { K.setZero(); Kh.setZero(); }
+        else band(S, [](auto c, auto) { c.setZero(); });
+      }
     }
 
     void add(const Slot& o, int mode) {
@@ -206,7 +223,7 @@ class NormalEquations {
       if (mode == 2) {
         R += o.R;
         C += o.C;
-        if (fused) band(K, o.K, [](auto c, auto oc) { c += oc; });
+        if (fused) { K += o.K; Kh += o.Kh; }
         else band(S, o.S, [](auto c, auto oc) { c += oc; });
       }
     }
@@ -237,6 +254,7 @@ class NormalEquations {
     Index i, h, m;
     Mat A, D, Y, E, G, V;      // h x B, h x B, m x B, m x B, h x B, (h(i+1) + h) x B
     Mat Xs, Ts;                // kSseBlock x i, kSseBlock x m: one block, channel-contiguous
+    Mat Pb;                    // fused: the pair products of one slice (host::jtj_reduced)
     bool fused;                // double on an AVX2 + FMA CPU: one SYRK gives S, C and R
     Slot part;
 
@@ -244,7 +262,9 @@ class NormalEquations {
         : net(n_), i(n_.inputs()), h(n_.hidden()), m(n_.outputs()),
           A(h, std::max(B, kSseBlock)), D(h, B), Y(m, B), E(m, B), G(h, B),
           V(fused_path() ? pad4(h) * (i + 1) + pad4(h + 1) : h * (i + 1) + h + 1, B),
-          Xs(kSseBlock, i), Ts(kSseBlock, m), fused(fused_path()), part(n_, fused) {
+          Xs(kSseBlock, i), Ts(kSseBlock, m),
+          Pb(fused_path() ? pairs_h(h) + pairs_z(i + 1) : 0, host::kernel::kPairSlice),
+          fused(fused_path()), part(n_, fused) {
       // the fused layout: block l of v at row l hs, a at nz hs, then the row of ones (the row
       // sums), padding rows zero (never written after this)
       V.setZero();
@@ -320,8 +340,9 @@ class NormalEquations {
               V.block(l * hs, 0, h, nb).array() = d.array().rowwise() * xb.row(l).array();
             V.block(i * hs, 0, h, nb) = d;
             V.block((i + 1) * hs, 0, h, nb) = a;
-            host::jtj_blocks_padded(out.K.data(), out.K.rows(), V.data(), V.rows(), hs,
-                                    pad4(h + 1), i + 1, nb);
+            host::jtj_reduced(out.Kh.data(), out.Kh.rows(), out.K.data(), out.K.rows(),
+                              V.data(), V.rows(), xb.data(), X.rows(), h, hs, pad4(h + 1), i + 1,
+                              out.Kh.rows(), out.Kh.cols(), nb, Pb.data());
             continue;
           }
         }
