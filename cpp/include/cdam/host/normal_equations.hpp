@@ -11,13 +11,17 @@
 // Per sample this costs about (h(i+1))^2 / 2 + (h+1) h (i+1) multiply-adds instead of the
 // m D^2 of forming J'J from J: for 6-20-8 about 12,700 against 759,000.
 //
-// S's block (l, l') is sum z_l z_l' d d', itself symmetric: only the lower triangle of every
-// block is needed. On a CPU with AVX2 + FMA (double), S (those triangles), C and R, with the
-// row sums of v and a, come from one pass over the stacked [v; a; 1] (host/kernels.hpp
-// jtj_blocks_padded: about 9,900 multiply-adds a sample for 6-20-8 against 12,900 for the lower
-// triangle of [v; a][v; a]'; about three times Eigen's SSE2 rankUpdate before the reduction;
-// each block padded with zero rows to a multiple of 4, issue 23 item 2);
-// otherwise from Eigen's rankUpdate and product, as written above.
+// S's entry (l h + j, l' h + j') is sum z_l z_l' d_j d_j': symmetric in (l, l') and in (j, j')
+// separately. On a CPU with AVX2 + FMA (double), modes 1 and 2 run two hand kernels per block
+// (host/kernels.hpp, issue 23 item 2): grad_block (the forward pass, e, g = (W2' e) .* d, the
+// gradient sums as register tiles over [e; g] against [a; 1; x; 1], and the rows of V) and
+// jtj_reduced: S as one dense product of the h (h + 1) / 2 pair products d_j d_j' against the
+// (i + 1)(i + 2) / 2 products z_l z_l' (5,880 multiply-adds a sample for 6-20-8, no triangle
+// waste), C and R (with the row sums of v and a) from [a; 1] against [v; a; 1]; about 9,700
+// multiply-adds a sample with the padding, near the 1-core DGEMM rate. 10,000 x 6-20-8, shared
+// 2-core EPYC, thread CPU: gradient pass 1.6 -> 1.0 ms, gradient + J'J 6.9 -> 5.9 ms against
+// the zero-padded lower triangles of session 6 (jtj_blocks_padded) and Eigen's SSE2 products.
+// Otherwise S, C and R come from Eigen's rankUpdate and products, as written above.
 // Mode 0 (the SSE alone: LM's trial and validation passes) in double is host/kernels.hpp's
 // sse_soa on blocks of 128 samples transposed on the fly.
 // The hidden activation (double) is the vectorised one of host/kernels.hpp (within 5e-16 of
@@ -134,6 +138,10 @@ class NormalEquations {
       for (auto& th : pool) th.join();
     }
     Slot& s = total_;
+    if (mode >= 1 && s.fused) {
+      s.gH = s.gHp.topLeftCorner(s.gH.rows(), s.gH.cols());
+      s.gO = s.gOp.topLeftCorner(s.gO.rows(), s.gO.cols());
+    }
     if (mode >= 1) assemble_gradient(s, *jte);
     if (mode == 2) {
       const Index P = s.C.cols(), h = net_.hidden();
@@ -177,6 +185,19 @@ class NormalEquations {
   // z_l z_l' to a multiple of 4.
   static Index pairs_h(Index h) { return (h * (h + 1) / 2 + 7) / 8 * 8; }
   static Index pairs_z(Index nz) { return pad4(nz * (nz + 1) / 2); }
+  // The rows of one sample's column of V in the fused layout (host::grad_block,
+  // host::jtj_reduced): the blocks v_l (l <= i, hs rows each, v_i = d), [a; 1] at pa (ha rows),
+  // e at pe (me), g at pg (hg), [x; 1] at pz (nzp); each padded to a multiple of 4.
+  static Index wp_size(const Net& n) {
+    const Index i = n.inputs(), h = n.hidden(), m = n.outputs();
+    return pad4(h) * (i + 1) + pad4(m) * (h + 1) + pad4(h) * m;
+  }
+  struct Lay {
+    Index hs, ha, me, hg, nzp, pa, pe, pg, pz, rows;
+    Lay(Index i, Index h, Index m)
+        : hs(pad4(h)), ha(pad4(h + 1)), me(pad4(m)), hg(pad4(h)), nzp(pad4(i + 1)),
+          pa(hs * (i + 1)), pe(pa + ha), pg(pe + me), pz(pg + hg), rows(pz + nzp) {}
+  };
 
   static bool fused_path() {
     if constexpr (std::is_same<Scalar, double>::value) return host::avx2_path(host::KernelPath::Auto);
@@ -189,6 +210,7 @@ class NormalEquations {
     bool fused;
     double sse = 0.0;
     Mat gH, gO;                // h x (i+1), m x (h+1)
+    Mat gHp, gOp;              // fused: hg x nzp, me x ha (Lay), their top-left corners gH, gO
     Mat S, R, C, K, Kh;        // h(i+1) sq (not fused), (h+1) sq, (h+1) x h(i+1);
                                // fused: K pad4(h+1) x (pad4(h)(i+1) + pad4(h+1)), Kh hw x nu
 
@@ -199,6 +221,9 @@ class NormalEquations {
       R.resize(h + 1, h + 1);
       C.resize(h + 1, P);
       if (fused) {
+        const Lay L(i, h, m);
+        gHp.resize(L.hg, L.nzp);
+        gOp.resize(L.me, L.ha);
         K.resize(pad4(h + 1), pad4(h) * (i + 1) + pad4(h + 1));
         Kh.resize(pairs_h(h), pairs_z(i + 1));
       } else {
@@ -208,7 +233,10 @@ class NormalEquations {
 
     void clear(int mode) {
       sse = 0.0;
-      if (mode >= 1) { gH.setZero(); gO.setZero(); }
+      if (mode >= 1) {
+        if (fused) { gHp.setZero(); gOp.setZero(); }
+        else { gH.setZero(); gO.setZero(); }
+      }
       if (mode == 2) {
         R.setZero();
         C.setZero();
@@ -219,7 +247,10 @@ class NormalEquations {
 
     void add(const Slot& o, int mode) {
       sse += o.sse;
-      if (mode >= 1) { gH += o.gH; gO += o.gO; }
+      if (mode >= 1) {
+        if (fused) { gHp += o.gHp; gOp += o.gOp; }
+        else { gH += o.gH; gO += o.gO; }
+      }
       if (mode == 2) {
         R += o.R;
         C += o.C;
@@ -255,20 +286,27 @@ class NormalEquations {
     Mat A, D, Y, E, G, V;      // h x B, h x B, m x B, m x B, h x B, (h(i+1) + h) x B
     Mat Xs, Ts;                // kSseBlock x i, kSseBlock x m: one block, channel-contiguous
     Mat Pb;                    // fused: the pair products of one slice (host::jtj_reduced)
+    Vec Wp;                    // fused: host::pad_weights' padded weights
     bool fused;                // double on an AVX2 + FMA CPU: one SYRK gives S, C and R
     Slot part;
 
     Scratch(const Net& n_, Index B)
         : net(n_), i(n_.inputs()), h(n_.hidden()), m(n_.outputs()),
-          A(h, std::max(B, kSseBlock)), D(h, B), Y(m, B), E(m, B), G(h, B),
-          V(fused_path() ? pad4(h) * (i + 1) + pad4(h + 1) : h * (i + 1) + h + 1, B),
+          A(fused_path() ? pad4(h) : h, std::max(B, kSseBlock)), D(h, B), Y(m, B), E(m, B), G(h, B),
+          V(fused_path() ? Lay(n_.inputs(), n_.hidden(), n_.outputs()).rows : h * (i + 1) + h + 1, B),
           Xs(kSseBlock, i), Ts(kSseBlock, m),
           Pb(fused_path() ? pairs_h(h) + pairs_z(i + 1) : 0, host::kernel::kPairSlice),
-          fused(fused_path()), part(n_, fused) {
-      // the fused layout: block l of v at row l hs, a at nz hs, then the row of ones (the row
-      // sums), padding rows zero (never written after this)
+          Wp(fused_path() ? wp_size(n_) : 0), fused(fused_path()), part(n_, fused) {
+      // the fused layout (Lay): block l of v at row l hs, a at pa, then the row of ones (the
+      // row sums), e, g, x and its row of ones; padding rows zero (never written after this)
       V.setZero();
-      V.row(fused ? pad4(h) * (i + 1) + h : h * (i + 2)).setOnes();
+      if (fused) {
+        const Lay L(i, h, m);
+        V.row(L.pa + h).setOnes();
+        V.row(L.pz + i).setOnes();
+      } else {
+        V.row(h * (i + 2)).setOnes();
+      }
     }
 
     // Mode 0 in double: the SSE by host/kernels.hpp's sse_soa (vectorised forward pass, AVX2 +
@@ -288,7 +326,7 @@ class NormalEquations {
     }
 
     void forward(const Scalar* theta, const ConstMap& X, Index b0, Index nb) {
-      auto a = A.leftCols(nb);
+      Eigen::Map<Mat> a(A.data(), h, nb);  // A has pad4(h) rows on the fused path
       a.noalias() = net.W1(theta) * X.middleCols(b0, nb);
       a.colwise() += net.b1(theta);
       const Activation act = net.activation();
@@ -314,6 +352,25 @@ class NormalEquations {
       const Index P = h * (i + 1);
       const Index B = D.cols();   // A may be wider (the SSE pass's block)
       const Activation act = net.activation();
+      if constexpr (std::is_same<Scalar, double>::value) {
+        if (fused) {  // the hand gradient pass and the reduced J'J kernel
+          const Lay L(i, h, m);
+          host::pad_weights(net, theta, L.hs, L.me, Wp.data());
+          for (Index b0 = lo; b0 < hi; b0 += B) {
+            const Index nb = std::min(B, hi - b0);
+            out.sse += host::grad_block(Wp.data(), i, h, m, L.hs, L.me,
+                                        net.activation() == Activation::Tansig,
+                                        X.data() + b0 * i, T.data() + b0 * m, nb, A.data(),
+                                        out.gHp.data(), L.nzp, out.gOp.data(), L.ha, V.data(),
+                                        V.rows(), L.pa, L.pe, L.pg, L.pz, mode >= 1, mode == 2);
+            if (mode < 2) continue;
+            host::jtj_reduced(out.Kh.data(), out.Kh.rows(), out.K.data(), out.K.rows(),
+                              V.data(), V.rows(), X.data() + b0 * i, i, h, L.hs, L.ha,
+                              i + 1, out.Kh.rows(), out.Kh.cols(), nb, Pb.data());
+          }
+          return;
+        }
+      }
       for (Index b0 = lo; b0 < hi; b0 += B) {
         const Index nb = std::min(B, hi - b0);
         forward(theta, X, b0, nb);
@@ -321,7 +378,7 @@ class NormalEquations {
         e = T.middleCols(b0, nb) - Y.leftCols(nb);
         out.sse += static_cast<double>(e.squaredNorm());
         if (mode == 0) continue;
-        auto a = A.leftCols(nb);
+        Eigen::Map<Mat> a(A.data(), h, nb);
         auto d = D.leftCols(nb);
         d = a.unaryExpr([act](Scalar v) { return activation_slope(act, v); });
         auto g = G.leftCols(nb);
@@ -333,19 +390,6 @@ class NormalEquations {
         out.gO.leftCols(h).noalias() += e * a.transpose();
         out.gO.col(h) += e.rowwise().sum();
         if (mode < 2) continue;
-        if constexpr (std::is_same<Scalar, double>::value) {
-          if (fused) {
-            const Index hs = pad4(h);
-            for (Index l = 0; l < i; ++l)
-              V.block(l * hs, 0, h, nb).array() = d.array().rowwise() * xb.row(l).array();
-            V.block(i * hs, 0, h, nb) = d;
-            V.block((i + 1) * hs, 0, h, nb) = a;
-            host::jtj_reduced(out.Kh.data(), out.Kh.rows(), out.K.data(), out.K.rows(),
-                              V.data(), V.rows(), xb.data(), X.rows(), h, hs, pad4(h + 1), i + 1,
-                              out.Kh.rows(), out.Kh.cols(), nb, Pb.data());
-            continue;
-          }
-        }
         auto v = V.topLeftCorner(P, nb);
         for (Index l = 0; l < i; ++l)
           v.middleRows(l * h, h).array() = d.array().rowwise() * xb.row(l).array();
