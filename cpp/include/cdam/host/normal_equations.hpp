@@ -177,8 +177,8 @@ class NormalEquations {
 
  private:
   // Rows of a block of V in the fused layout: h (or h + 1) padded to a multiple of 4, so the
-  // tiles of jtj_blocks_padded have no one-row remainders (h = 10: J'J 5.6 -> 1.8 ms, h = 20:
-  // 5.6 -> 4.7 ms on 10,000 samples; the padded rows are zero and their sums never read).
+  // register tiles have no one-row remainders (session 6, h = 10: J'J 5.6 -> 1.8 ms, h = 20:
+  // 5.6 -> 4.7 ms on 10,000 samples; the sums of the padded rows are never read).
   static Index pad4(Index r) { return (r + 3) / 4 * 4; }
   // Rows of the reduced J'J's pair sums (host::jtj_reduced): the h (h + 1) / 2 products
   // d_j d_j' padded to a multiple of 8 (whole 8 x 4 tiles), the nz (nz + 1) / 2 products
@@ -205,7 +205,7 @@ class NormalEquations {
   }
 
   // The partial sums of one chunk: sse, the gradient blocks, and the J'J blocks (fused: S, C
-  // and R together in K, host::jtj_blocks; otherwise S, R and C).
+  // and R in K, S as pair sums in Kh, host::jtj_reduced; otherwise S, R and C).
   struct Slot {
     bool fused;
     double sse = 0.0;
@@ -417,7 +417,7 @@ class NormalEquations {
     const auto W2 = net_.W2(theta);
     const Mat Q = W2.transpose() * W2;  // h x h
     // hidden-hidden: S's block (l, l') (l >= l') is symmetric, and only the lower triangle of
-    // each block is read (jtj_blocks computes no more)
+    // each block is read (jtj_reduced computes no more)
     const Index nz = ph / h;
     for (Index l2 = 0; l2 < nz; ++l2)
       for (Index j2 = 0; j2 < h; ++j2) {
