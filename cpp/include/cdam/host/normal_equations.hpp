@@ -204,7 +204,7 @@ class NormalEquations {
     return false;
   }
 
-  // The partial sums of one chunk: sse, the gradient blocks, and the J'J blocks (fused: S, C
+  // The partial sums of one chunk: sse, the gradient blocks, and the J'J blocks (fused: C
   // and R in K, S as pair sums in Kh, host::jtj_reduced; otherwise S, R and C).
   struct Slot {
     bool fused;
