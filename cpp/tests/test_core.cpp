@@ -95,10 +95,18 @@ TEST_CASE("network Jacobian equals central finite differences") {
 
 TEST_CASE("structured J'J and J'e equal those formed from the explicit Jacobian") {
   Rng rng(11);
-  // n > 2 blocks of 256 and two threads; h = 10 and 13 pad the fused blocks to 12 and 16 rows
-  for (const Index h : {5, 10, 13}) {
-    const Index i = 3, m = 2, n = 700;
-    Mlp<double> net(i, h, m, Activation::Tansig);
+  // n > 2 blocks of 256 and two threads; h = 10 and 13 pad the fused blocks to 12 and 16 rows;
+  // the reduced J'J (host::jtj_reduced) and the gradient pass (host::grad_block) at sizes whose
+  // pair counts and outputs are not multiples of 4 or 8, both activations
+  struct Size { Index i, m; Activation act; };
+  for (const Index h : {1, 5, 10, 13, 20})
+  for (const Size sz : {Size{3, 2, Activation::Tansig}, Size{1, 5, Activation::Logsig},
+                        Size{6, 1, Activation::Tansig}, Size{2, 8, Activation::Logsig}}) {
+    const Index i = sz.i, m = sz.m, n = 700;
+    CAPTURE(h);
+    CAPTURE(i);
+    CAPTURE(m);
+    Mlp<double> net(i, h, m, sz.act);
     const Index D = net.num_params();
     Eigen::MatrixXd X(i, n), T(m, n);
     for (Index k = 0; k < X.size(); ++k) X.data()[k] = rng.uniform(-1.0, 1.0);
@@ -107,10 +115,12 @@ TEST_CASE("structured J'J and J'e equal those formed from the explicit Jacobian"
     for (Index k = 0; k < D; ++k) theta[k] = rng.uniform(-1.0, 1.0);
     Eigen::MatrixXd Jn(m, D), JtJ = Eigen::MatrixXd::Zero(D, D);
     Eigen::VectorXd Jte = Eigen::VectorXd::Zero(D), hid(h), y(m);
+    Eigen::MatrixXd Yref(m, n);
     double sse = 0;
     for (Index s = 0; s < n; ++s) {
       net.jacobian(theta.data(), X.col(s).data(), hid.data(), Jn.data());
       net.forward(theta.data(), X.col(s).data(), hid.data(), y.data());
+      Yref.col(s) = y;
       const Eigen::VectorXd e = T.col(s) - y;
       JtJ += Jn.transpose() * Jn;
       Jte += Jn.transpose() * e;
@@ -125,6 +135,9 @@ TEST_CASE("structured J'J and J'e equal those formed from the explicit Jacobian"
       CHECK(s2 == doctest::Approx(sse).epsilon(1e-12));
       CHECK((jtj - JtJ).cwiseAbs().maxCoeff() <= 1e-11 * JtJ.cwiseAbs().maxCoeff());
       CHECK((jte - Jte).cwiseAbs().maxCoeff() <= 1e-11 * Jte.cwiseAbs().maxCoeff());
+      Eigen::MatrixXd Y(m, n);
+      ne.predict(theta.data(), Xm, Eigen::Map<Eigen::MatrixXd>(Y.data(), m, n));
+      CHECK((Y - Yref).cwiseAbs().maxCoeff() <= 1e-13);
     }
   }
 }

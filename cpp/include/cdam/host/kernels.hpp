@@ -30,8 +30,10 @@
 // time when the CPU has them (`KernelPath::Auto`; `KernelPath::Generic` forces the SSE2 build):
 // 4 doubles per instruction instead of 2, and FMA. The tiles' generic build is slow (the
 // 8-accumulator tile spills with SSE2 registers): normal_equations.hpp and training.hpp only
-// call jtj_blocks and the Cholesky on the AVX2 path and keep Eigen's rankUpdate and LLT
-// otherwise.
+// call grad_block, jtj_reduced and the Cholesky on the AVX2 path and keep Eigen's products,
+// rankUpdate and LLT otherwise (jtj_blocks, the session-6 form, is no longer called by the LM;
+// it is kept with its test). The SSE kernel is also built for AVX-512 and taken when the CPU has
+// it (issue 23 item 2: 0.43 against 0.52 ms at 10,000 x 6-20-8).
 // Both paths give the same value to rounding (FMA contraction may change the last bits); one
 // machine always takes the same path, so a seed still gives the same run.
 // Measured (10,000 samples, 6-20-8, shared 2-core AMD EPYC, load 3-7): the SSE kernel 0.65-0.9
@@ -266,6 +268,136 @@ namespace kernel {
     tiles(K + P + P * ldk, ldk, Vs + P, Vs + P, ldv, ha, ha, ns, true, 1.0);                 \
   }
 
+// The reduced J'J sums (issue 23, item 2): the hidden-hidden sums S(l h + j, l' h + j') =
+// sum z_l z_l' d_j d_j' use the symmetry in the inputs and in the hidden units separately: per
+// slice of samples the products w = d_j d_j' (j >= j', hw rows, the pairs j (j + 1) / 2 + j', zero
+// rows up to hw) and u = z_l z_l' (l >= l', nu rows, pairs l (l + 1) / 2 + l', z_{nz-1} = 1)
+// are formed in buf (ld hw + nu, kPairSlice columns) and Kh (hw x nu, leading dimension ldh) +=
+// w u^T by the dense 8 x 4 tiles: h (h + 1) / 2 (i + 1) (i + 2) / 2 multiply-adds a sample (5,880
+// for 6-20-8) with no triangle waste, against 6,720 for the lower triangles of the h x h blocks.
+// The rest as in CDAM_JTJ_BODY, into K (ha x (P + ha), leading dimension ldk, P = nz hs):
+// columns 0 .. P - 1 receive sum [a; 1] v^T (the C blocks, the row sums of v in row h), columns
+// P .. P + ha - 1 the lower triangle of sum [a; 1] [a; 1]^T (R). d is V's block nz - 1 (z_{nz-1} = 1, so v_{nz-1} = d); the
+// inputs z_l (l < nz - 1) are X[l + s ldx].
+#define CDAM_JTJR_BODY                                                                       \
+  typedef double v4d __attribute__((vector_size(32)));                                       \
+  const Index P = nz * hs, ldb = hw + nu, hp = h * (h + 1) / 2;                              \
+  const double* Dv = V + (nz - 1) * hs;                                                      \
+  for (Index s0 = 0; s0 < nb; s0 += kPairSlice) {                                            \
+    const Index ns = nb - s0 < kPairSlice ? nb - s0 : kPairSlice;                            \
+    for (Index s = 0; s < ns; ++s) {                                                         \
+      const double* d = Dv + (s0 + s) * ldv;                                                 \
+      const double* x = X + (s0 + s) * ldx;                                                  \
+      double* w = buf + s * ldb;                                                             \
+      /* whole 4-vectors: row j's last store may run up to 3 values into row j + 1 (written  \
+         next), the padding or u (both written after); d is read within its padded block */ \
+      for (Index j = 0; j < h; ++j) {                                                        \
+        const double dj = d[j];                                                              \
+        double* wj = w + j * (j + 1) / 2;                                                    \
+        for (Index j2 = 0; j2 <= j; j2 += 4) {                                               \
+          v4d dv;                                                                            \
+          std::memcpy(&dv, d + j2, sizeof dv);                                               \
+          dv *= dj;                                                                          \
+          std::memcpy(wj + j2, &dv, sizeof dv);                                              \
+        }                                                                                    \
+      }                                                                                      \
+      for (Index q = hp; q < hw; ++q) w[q] = 0.0;                                            \
+      double* u = w + hw;                                                                    \
+      Index q = 0;                                                                           \
+      for (Index l = 0; l < nz; ++l) {                                                       \
+        const double zl = l + 1 < nz ? x[l] : 1.0;                                           \
+        for (Index l2 = 0; l2 <= l; ++l2) u[q++] = zl * (l2 + 1 < nz ? x[l2] : 1.0);         \
+      }                                                                                      \
+      for (; q < nu; ++q) u[q] = 0.0;                                                        \
+    }                                                                                        \
+    tiles(Kh, ldh, buf, buf + hw, ldb, hw, nu, ns, false, 1.0);                              \
+    const double* Vs = V + s0 * ldv;                                                         \
+    tiles(K, ldk, Vs + P, Vs, ldv, ha, P, ns, false, 1.0);                                   \
+    tiles(K + P * ldk, ldk, Vs + P, Vs + P, ldv, ha, ha, ns, true, 1.0);                     \
+  }
+
+// The gradient pass of LM (normal_equations.hpp modes 1 and 2) over one block of nb samples,
+// one sample a column (X: i x nb, leading dimension i; T: m x nb, leading dimension m), in
+// place of Eigen's small products. The weights come zero-padded (W1p hs x i, b1p hs, W2p me x h,
+// b2p me, W2tp = W2' hs x m, each column a whole number of 4-vectors), so every sum runs in a
+// register over whole vectors of hidden units or outputs: a = act(W1 x + b1) for every sample
+// into A (hs x nb), the activation over the block, then per sample y = W2 a + b2, e = t - y,
+// sse += e'e, g = (W2' e) .* d (d = act'(a)), written into V's column (leading dimension ldv):
+// a at row pa (h rows; row pa + h holds 1), e at pe (me), g at pg (hs), x at pz (row pz + i
+// holds 1; the constant and padding rows are the caller's), and with full (mode 2) the fused
+// layout's v_l = d x_l at rows l hs (l < i) and d at i hs (their padding rows get values that are
+// never read). The gradient sums then come from the tiles, per slice of 32 samples:
+// gO (me x ha, leading dimension me) += e [a; 1]', gH (hs x nzp, leading dimension hs) +=
+// g [x; 1]'. Without grad only the sse (and e) is computed. Returns the block's sse.
+#define CDAM_FB_BODY                                                                         \
+  typedef double v4d __attribute__((vector_size(32)));                                       \
+  for (Index s = 0; s < nb; ++s) {                                                           \
+    const double* x = X + s * i;                                                             \
+    for (Index j0 = 0; j0 < hs; j0 += 4) {                                                   \
+      v4d acc;                                                                               \
+      std::memcpy(&acc, b1p + j0, sizeof acc);                                               \
+      for (Index l = 0; l < i; ++l) {                                                        \
+        v4d w;                                                                               \
+        std::memcpy(&w, W1p + l * hs + j0, sizeof w);                                        \
+        acc += w * x[l];                                                                     \
+      }                                                                                      \
+      std::memcpy(A + s * hs + j0, &acc, sizeof acc);                                        \
+    }                                                                                        \
+  }                                                                                          \
+  activate_block(A, hs * nb, tansig);                                                        \
+  double sse = 0.0;                                                                          \
+  for (Index s = 0; s < nb; ++s) {                                                           \
+    const double* x = X + s * i;                                                             \
+    const double* t = T + s * m;                                                             \
+    const double* as = A + s * hs;                                                           \
+    double* vs = V + s * ldv;                                                                \
+    double* e = vs + pe;                                                                     \
+    for (Index k0 = 0; k0 < me; k0 += 4) {                                                   \
+      v4d acc;                                                                               \
+      std::memcpy(&acc, b2p + k0, sizeof acc);                                               \
+      for (Index j = 0; j < h; ++j) {                                                        \
+        v4d w;                                                                               \
+        std::memcpy(&w, W2p + j * me + k0, sizeof w);                                        \
+        acc += w * as[j];                                                                    \
+      }                                                                                      \
+      std::memcpy(e + k0, &acc, sizeof acc);                                                 \
+    }                                                                                        \
+    for (Index k = 0; k < m; ++k) {                                                          \
+      e[k] = t[k] - e[k];                                                                    \
+      sse += e[k] * e[k];                                                                    \
+    }                                                                                        \
+    if (!grad) continue;                                                                     \
+    for (Index k = m; k < me; ++k) e[k] = 0.0;                                               \
+    for (Index j0 = 0; j0 < hs; j0 += 4) {                                                   \
+      v4d acc = {0.0, 0.0, 0.0, 0.0}, av;                                                    \
+      for (Index k = 0; k < m; ++k) {                                                        \
+        v4d w;                                                                               \
+        std::memcpy(&w, W2tp + k * hs + j0, sizeof w);                                       \
+        acc += w * e[k];                                                                     \
+      }                                                                                      \
+      std::memcpy(&av, as + j0, sizeof av);                                                  \
+      const v4d dv = tansig ? 1.0 - av * av : av * (1.0 - av);                               \
+      acc *= dv;                                                                             \
+      std::memcpy(vs + pg + j0, &acc, sizeof acc);                                           \
+      if (full) {                                                                            \
+        for (Index l = 0; l < i; ++l) {                                                      \
+          const v4d vl = dv * x[l];                                                          \
+          std::memcpy(vs + l * hs + j0, &vl, sizeof vl);                                     \
+        }                                                                                    \
+        std::memcpy(vs + i * hs + j0, &dv, sizeof dv);                                       \
+      }                                                                                      \
+    }                                                                                        \
+    std::memcpy(vs + pa, as, sizeof(double) * h);                                            \
+    std::memcpy(vs + pz, x, sizeof(double) * i);                                             \
+  }                                                                                          \
+  for (Index s0 = 0; grad && s0 < nb; s0 += 32) {                                           \
+    const Index ns = nb - s0 < 32 ? nb - s0 : 32;                                            \
+    const double* Vs = V + s0 * ldv;                                                         \
+    tiles(gO, me, Vs + pe, Vs + pa, ldv, me, ha, ns, false, 1.0);                            \
+    tiles(gH, hs, Vs + pg, Vs + pz, ldv, hs, nzp, ns, false, 1.0);                           \
+  }                                                                                          \
+  return sse;
+
 // Cholesky factor of the symmetric n x n matrix A (lower triangle read, column-major, leading
 // dimension ld) in place: A = L L', L in the lower triangle (the strict upper triangle is
 // scratch). Right-looking, in panels of kCholPanel columns: the panel's diagonal block by
@@ -320,6 +452,19 @@ namespace kernel {
   double *__restrict K, Index ldk, const double *__restrict V, Index ldv, Index hs, Index ha, \
       Index nz, Index nb
 
+#define CDAM_JTJR_ARGS                                                                       \
+  double *__restrict Kh, Index ldh, double *__restrict K, Index ldk,                          \
+      const double *__restrict V, Index ldv, const double *__restrict X, Index ldx, Index h,   \
+      Index hs, Index ha, Index nz, Index hw, Index nu, Index nb, double *__restrict buf
+
+#define CDAM_FB_ARGS                                                                         \
+  const double *__restrict W1p, const double *__restrict b1p, const double *__restrict W2p,   \
+      const double *__restrict b2p, const double *__restrict W2tp, Index i, Index h, Index m,  \
+      Index hs, Index me, bool tansig, const double *__restrict X, const double *__restrict T, \
+      Index nb, double *__restrict A, double *__restrict gH, Index nzp,                       \
+      double *__restrict gO, Index ha, double *__restrict V, Index ldv, Index pa, Index pe,    \
+      Index pg, Index pz, bool grad, bool full
+
 #define CDAM_SSE_ARGS                                                                        \
   const double *__restrict W1, const double *__restrict b1, const double *__restrict W2,      \
       const double *__restrict b2, Index i, Index h, Index m, bool tansig,                    \
@@ -328,6 +473,8 @@ namespace kernel {
 
 // Columns per panel of the blocked Cholesky (one syrk_lower slice of samples).
 constexpr Index kCholPanel = 32;
+// Samples per slice of the reduced J'J's pair products (buf: (hw + nu) kPairSlice doubles).
+constexpr Index kPairSlice = 16;
 
 namespace generic {
 inline void activate_block(double* __restrict v, Index n, bool tansig) { CDAM_ACT_BODY }
@@ -335,6 +482,8 @@ inline double sse_block(CDAM_SSE_ARGS) { CDAM_SSE_BODY }
 inline void tiles(CDAM_TILES_ARGS) { CDAM_TILES_BODY }
 inline void syrk_lower(CDAM_SYRK_ARGS) { CDAM_SYRK_BODY }
 inline void jtj_blocks(CDAM_JTJ_ARGS) { CDAM_JTJ_BODY }
+inline void jtj_reduced(CDAM_JTJR_ARGS) { CDAM_JTJR_BODY }
+inline double grad_block(CDAM_FB_ARGS) { CDAM_FB_BODY }
 inline Index cholesky_lower(double* A, Index ld, Index n) { CDAM_CHOL_BODY }
 inline void cholesky_solve(const double* L, Index ld, Index n, double* b) { CDAM_CHOL_SOLVE_BODY }
 }  // namespace generic
@@ -350,6 +499,8 @@ __attribute__((target("avx2,fma"))) inline double sse_block(CDAM_SSE_ARGS) { CDA
 __attribute__((target("avx2,fma"))) inline void tiles(CDAM_TILES_ARGS) { CDAM_TILES_BODY }
 __attribute__((target("avx2,fma"))) inline void syrk_lower(CDAM_SYRK_ARGS) { CDAM_SYRK_BODY }
 __attribute__((target("avx2,fma"))) inline void jtj_blocks(CDAM_JTJ_ARGS) { CDAM_JTJ_BODY }
+__attribute__((target("avx2,fma"))) inline void jtj_reduced(CDAM_JTJR_ARGS) { CDAM_JTJR_BODY }
+__attribute__((target("avx2,fma"))) inline double grad_block(CDAM_FB_ARGS) { CDAM_FB_BODY }
 __attribute__((target("avx2,fma"))) inline Index cholesky_lower(double* A, Index ld, Index n) {
   CDAM_CHOL_BODY
 }
@@ -358,13 +509,31 @@ __attribute__((target("avx2,fma"))) inline void cholesky_solve(const double* L, 
   CDAM_CHOL_SOLVE_BODY
 }
 }  // namespace avx2
+// AVX-512 (F, VL, DQ): the SSE pass of LM's trial steps only, where the 8-lane activation pays
+// (10,000 x 6-20-8: 0.43 against 0.52 ms on the AVX2 build; the J'J tiles, the gradient pass and
+// the Cholesky measured no faster with it, so they keep the AVX2 build).
+namespace avx512 {
+#define CDAM_TARGET_512 \
+  __attribute__((target("avx512f,avx512vl,avx512dq,avx2,fma,prefer-vector-width=512")))
+CDAM_TARGET_512 inline void activate_block(double* __restrict v, Index n, bool tansig) {
+  CDAM_ACT_BODY
+}
+CDAM_TARGET_512 inline double sse_block(CDAM_SSE_ARGS) { CDAM_SSE_BODY }
+#undef CDAM_TARGET_512
+}  // namespace avx512
 inline bool cpu_has_avx2() {
   static const bool has = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+  return has;
+}
+inline bool cpu_has_avx512() {
+  static const bool has = cpu_has_avx2() && __builtin_cpu_supports("avx512f") &&
+                          __builtin_cpu_supports("avx512vl") && __builtin_cpu_supports("avx512dq");
   return has;
 }
 #else
 #define CDAM_HAVE_AVX2_CLONE 0
 inline bool cpu_has_avx2() { return false; }
+inline bool cpu_has_avx512() { return false; }
 #endif
 
 #undef CDAM_ACT_BODY
@@ -376,6 +545,10 @@ inline bool cpu_has_avx2() { return false; }
 #undef CDAM_TILES_ARGS
 #undef CDAM_JTJ_BODY
 #undef CDAM_JTJ_ARGS
+#undef CDAM_JTJR_BODY
+#undef CDAM_JTJR_ARGS
+#undef CDAM_FB_BODY
+#undef CDAM_FB_ARGS
 #undef CDAM_CHOL_BODY
 #undef CDAM_CHOL_SOLVE_BODY
 
@@ -409,6 +582,8 @@ inline double sse_soa(const Mlp<double>& net, const double* theta, const double*
                *b2 = theta + net.off_b2();
   const bool tansig = net.activation() == Activation::Tansig;
 #if CDAM_HAVE_AVX2_CLONE
+  if (avx2_path(p) && kernel::cpu_has_avx512())
+    return kernel::avx512::sse_block(W1, b1, W2, b2, i, h, m, tansig, X, T, ld, n, a, B);
   if (avx2_path(p)) return kernel::avx2::sse_block(W1, b1, W2, b2, i, h, m, tansig, X, T, ld, n, a, B);
 #endif
   (void)p;
@@ -442,6 +617,62 @@ inline void jtj_blocks_padded(double* K, Index ldk, const double* V, Index ldv, 
 inline void jtj_blocks(double* K, Index ldk, const double* V, Index ldv, Index h, Index nz,
                        Index nb, KernelPath p = KernelPath::Auto) {
   jtj_blocks_padded(K, ldk, V, ldv, h, h + 1, nz, nb, p);
+}
+
+// The reduced J'J sums (CDAM_JTJR_BODY): Kh (hw x nu, ldh) += the pair products, K the C and R
+// blocks as jtj_blocks_padded; X: the inputs (column = sample, ldx), buf: (hw + nu) kPairSlice
+// doubles of caller storage.
+inline void jtj_reduced(double* Kh, Index ldh, double* K, Index ldk, const double* V, Index ldv,
+                        const double* X, Index ldx, Index h, Index hs, Index ha, Index nz,
+                        Index hw, Index nu, Index nb, double* buf,
+                        KernelPath p = KernelPath::Auto) {
+#if CDAM_HAVE_AVX2_CLONE
+  if (avx2_path(p))
+    return kernel::avx2::jtj_reduced(Kh, ldh, K, ldk, V, ldv, X, ldx, h, hs, ha, nz, hw, nu, nb,
+                                     buf);
+#endif
+  (void)p;
+  kernel::generic::jtj_reduced(Kh, ldh, K, ldk, V, ldv, X, ldx, h, hs, ha, nz, hw, nu, nb, buf);
+}
+
+// The gradient pass over one block (CDAM_FB_BODY): returns the sse, adds to gH (hs x nzp) and gO
+// (me x ha), fills V's rows (and the fused layout's when full). Wp: the padded weights, W1p
+// (hs x i), b1p (hs), W2p (me x h), b2p (me), W2tp (hs x m), in that order (pad_weights);
+// A: hs nb doubles of caller storage.
+inline double grad_block(const double* Wp, Index i, Index h, Index m, Index hs, Index me,
+                         bool tansig, const double* X, const double* T, Index nb, double* A,
+                         double* gH, Index nzp, double* gO, Index ha, double* V, Index ldv,
+                         Index pa, Index pe, Index pg, Index pz, bool grad, bool full,
+                         KernelPath p = KernelPath::Auto) {
+  const double *W1p = Wp, *b1p = W1p + hs * i, *W2p = b1p + hs, *b2p = W2p + me * h,
+               *W2tp = b2p + me;
+#if CDAM_HAVE_AVX2_CLONE
+  if (avx2_path(p))
+    return kernel::avx2::grad_block(W1p, b1p, W2p, b2p, W2tp, i, h, m, hs, me, tansig, X, T, nb,
+                                    A, gH, nzp, gO, ha, V, ldv, pa, pe, pg, pz, grad, full);
+#endif
+  (void)p;
+  return kernel::generic::grad_block(W1p, b1p, W2p, b2p, W2tp, i, h, m, hs, me, tansig, X, T, nb,
+                                     A, gH, nzp, gO, ha, V, ldv, pa, pe, pg, pz, grad, full);
+}
+
+// The padded weights of grad_block into Wp (hs i + hs + me h + me + hs m doubles, zeros first).
+inline void pad_weights(const Mlp<double>& net, const double* theta, Index hs, Index me,
+                        double* Wp) {
+  const Index i = net.inputs(), h = net.hidden(), m = net.outputs();
+  const double *W1 = theta, *b1 = theta + net.off_b1(), *W2 = theta + net.off_w2(),
+               *b2 = theta + net.off_b2();
+  double *W1p = Wp, *b1p = W1p + hs * i, *W2p = b1p + hs, *b2p = W2p + me * h, *W2tp = b2p + me;
+  std::memset(Wp, 0, sizeof(double) * static_cast<size_t>(hs * i + hs + me * h + me + hs * m));
+  for (Index l = 0; l < i; ++l)
+    for (Index j = 0; j < h; ++j) W1p[l * hs + j] = W1[l * h + j];
+  for (Index j = 0; j < h; ++j) b1p[j] = b1[j];
+  for (Index j = 0; j < h; ++j)
+    for (Index k = 0; k < m; ++k) {
+      W2p[j * me + k] = W2[j * m + k];
+      W2tp[k * hs + j] = W2[j * m + k];
+    }
+  for (Index k = 0; k < m; ++k) b2p[k] = b2[k];
 }
 
 // Cholesky factor in place (CDAM_CHOL_BODY): A (n x n, leading dimension ld, lower triangle

@@ -11,13 +11,17 @@
 // Per sample this costs about (h(i+1))^2 / 2 + (h+1) h (i+1) multiply-adds instead of the
 // m D^2 of forming J'J from J: for 6-20-8 about 12,700 against 759,000.
 //
-// S's block (l, l') is sum z_l z_l' d d', itself symmetric: only the lower triangle of every
-// block is needed. On a CPU with AVX2 + FMA (double), S (those triangles), C and R, with the
-// row sums of v and a, come from one pass over the stacked [v; a; 1] (host/kernels.hpp
-// jtj_blocks_padded: about 9,900 multiply-adds a sample for 6-20-8 against 12,900 for the lower
-// triangle of [v; a][v; a]'; about three times Eigen's SSE2 rankUpdate before the reduction;
-// each block padded with zero rows to a multiple of 4, issue 23 item 2);
-// otherwise from Eigen's rankUpdate and product, as written above.
+// S's entry (l h + j, l' h + j') is sum z_l z_l' d_j d_j': symmetric in (l, l') and in (j, j')
+// separately. On a CPU with AVX2 + FMA (double), modes 1 and 2 run two hand kernels per block
+// (host/kernels.hpp, issue 23 item 2): grad_block (the forward pass, e, g = (W2' e) .* d, the
+// gradient sums as register tiles over [e; g] against [a; 1; x; 1], and the rows of V) and
+// jtj_reduced: S as one dense product of the h (h + 1) / 2 pair products d_j d_j' against the
+// (i + 1)(i + 2) / 2 products z_l z_l' (5,880 multiply-adds a sample for 6-20-8, no triangle
+// waste), C and R (with the row sums of v and a) from [a; 1] against [v; a; 1]; about 9,700
+// multiply-adds a sample with the padding, near the 1-core DGEMM rate. 10,000 x 6-20-8, shared
+// 2-core EPYC, thread CPU: gradient pass 1.6 -> 1.0 ms, gradient + J'J 6.9 -> 5.9 ms against
+// the zero-padded lower triangles of session 6 (jtj_blocks_padded) and Eigen's SSE2 products.
+// Otherwise S, C and R come from Eigen's rankUpdate and products, as written above.
 // Mode 0 (the SSE alone: LM's trial and validation passes) in double is host/kernels.hpp's
 // sse_soa on blocks of 128 samples transposed on the fly.
 // The hidden activation (double) is the vectorised one of host/kernels.hpp (within 5e-16 of
@@ -134,19 +138,25 @@ class NormalEquations {
       for (auto& th : pool) th.join();
     }
     Slot& s = total_;
+    if (mode >= 1 && s.fused) {
+      s.gH = s.gHp.topLeftCorner(s.gH.rows(), s.gH.cols());
+      s.gO = s.gOp.topLeftCorner(s.gO.rows(), s.gO.cols());
+    }
     if (mode >= 1) assemble_gradient(s, *jte);
     if (mode == 2) {
       const Index P = s.C.cols(), h = net_.hidden();
-      if (s.fused) {  // S (lower triangle of each h x h block), C and R from the padded K
+      if (s.fused) {  // S from the pair sums Kh, C and R from the padded K
         const Index hs = pad4(h), nz = P / h, Pp = nz * hs;
         for (Index l = 0; l < nz; ++l) {
-          for (Index l2 = 0; l2 < l; ++l2)
-            S_.block(l * h, l2 * h, h, h) = s.K.block(l * hs, l2 * hs, h, h);
-          S_.block(l * h, l * h, h, h).template triangularView<Eigen::Lower>() =
-              s.K.block(l * hs, l * hs, h, h);
-          s.C.middleCols(l * h, h) = s.K.block(Pp, l * hs, h + 1, h);
+          for (Index l2 = 0; l2 <= l; ++l2) {
+            const Index cu = l * (l + 1) / 2 + l2;
+            for (Index j2 = 0; j2 < h; ++j2)
+              for (Index j = j2; j < h; ++j)
+                S_(l * h + j, l2 * h + j2) = s.Kh(j * (j + 1) / 2 + j2, cu);
+          }
+          s.C.middleCols(l * h, h) = s.K.block(0, l * hs, h + 1, h);
         }
-        s.R.template triangularView<Eigen::Lower>() = s.K.block(Pp, Pp, h + 1, h + 1);
+        s.R.template triangularView<Eigen::Lower>() = s.K.block(0, Pp, h + 1, h + 1);
       } else {
         S_.template triangularView<Eigen::Lower>() = s.S;
       }
@@ -167,22 +177,42 @@ class NormalEquations {
 
  private:
   // Rows of a block of V in the fused layout: h (or h + 1) padded to a multiple of 4, so the
-  // tiles of jtj_blocks_padded have no one-row remainders (h = 10: J'J 5.6 -> 1.8 ms, h = 20:
-  // 5.6 -> 4.7 ms on 10,000 samples; the padded rows are zero and their sums never read).
+  // register tiles have no one-row remainders (session 6, h = 10: J'J 5.6 -> 1.8 ms, h = 20:
+  // 5.6 -> 4.7 ms on 10,000 samples; the sums of the padded rows are never read).
   static Index pad4(Index r) { return (r + 3) / 4 * 4; }
+  // Rows of the reduced J'J's pair sums (host::jtj_reduced): the h (h + 1) / 2 products
+  // d_j d_j' padded to a multiple of 8 (whole 8 x 4 tiles), the nz (nz + 1) / 2 products
+  // z_l z_l' to a multiple of 4.
+  static Index pairs_h(Index h) { return (h * (h + 1) / 2 + 7) / 8 * 8; }
+  static Index pairs_z(Index nz) { return pad4(nz * (nz + 1) / 2); }
+  // The rows of one sample's column of V in the fused layout (host::grad_block,
+  // host::jtj_reduced): the blocks v_l (l <= i, hs rows each, v_i = d), [a; 1] at pa (ha rows),
+  // e at pe (me), g at pg (hg), [x; 1] at pz (nzp); each padded to a multiple of 4.
+  static Index wp_size(const Net& n) {
+    const Index i = n.inputs(), h = n.hidden(), m = n.outputs();
+    return pad4(h) * (i + 1) + pad4(m) * (h + 1) + pad4(h) * m;
+  }
+  struct Lay {
+    Index hs, ha, me, hg, nzp, pa, pe, pg, pz, rows;
+    Lay(Index i, Index h, Index m)
+        : hs(pad4(h)), ha(pad4(h + 1)), me(pad4(m)), hg(pad4(h)), nzp(pad4(i + 1)),
+          pa(hs * (i + 1)), pe(pa + ha), pg(pe + me), pz(pg + hg), rows(pz + nzp) {}
+  };
 
   static bool fused_path() {
     if constexpr (std::is_same<Scalar, double>::value) return host::avx2_path(host::KernelPath::Auto);
     return false;
   }
 
-  // The partial sums of one chunk: sse, the gradient blocks, and the J'J blocks (fused: S, C
-  // and R together in K, host::jtj_blocks; otherwise S, R and C).
+  // The partial sums of one chunk: sse, the gradient blocks, and the J'J blocks (fused: C
+  // and R in K, S as pair sums in Kh, host::jtj_reduced; otherwise S, R and C).
   struct Slot {
     bool fused;
     double sse = 0.0;
     Mat gH, gO;                // h x (i+1), m x (h+1)
-    Mat S, R, C, K;            // h(i+1) sq (not fused), (h+1) sq, (h+1) x h(i+1), h(i+2)+1 sq (fused)
+    Mat gHp, gOp;              // fused: hg x nzp, me x ha (Lay), their top-left corners gH, gO
+    Mat S, R, C, K, Kh;        // h(i+1) sq (not fused), (h+1) sq, (h+1) x h(i+1);
+                               // fused: K pad4(h+1) x (pad4(h)(i+1) + pad4(h+1)), Kh hw x nu
 
     Slot(const Net& n_, bool fused_) : fused(fused_) {
       const Index i = n_.inputs(), h = n_.hidden(), m = n_.outputs(), P = h * (i + 1);
@@ -190,23 +220,41 @@ class NormalEquations {
       gO.resize(m, h + 1);
       R.resize(h + 1, h + 1);
       C.resize(h + 1, P);
-      if (fused) K.resize(pad4(h) * (i + 1) + pad4(h + 1), pad4(h) * (i + 1) + pad4(h + 1));
-      else S.resize(P, P);
+      if (fused) {
+        const Lay L(i, h, m);
+        gHp.resize(L.hg, L.nzp);
+        gOp.resize(L.me, L.ha);
+        K.resize(pad4(h + 1), pad4(h) * (i + 1) + pad4(h + 1));
+        Kh.resize(pairs_h(h), pairs_z(i + 1));
+      } else {
+        S.resize(P, P);
+      }
     }
 
     void clear(int mode) {
       sse = 0.0;
-      if (mode >= 1) { gH.setZero(); gO.setZero(); }
-      if (mode == 2) { R.setZero(); C.setZero(); band(fused ? K : S, [](auto c, auto) { c.setZero(); }); }
+      if (mode >= 1) {
+        if (fused) { gHp.setZero(); gOp.setZero(); }
+        else { gH.setZero(); gO.setZero(); }
+      }
+      if (mode == 2) {
+        R.setZero();
+        C.setZero();
+        if (fused) { K.setZero(); Kh.setZero(); }
+        else band(S, [](auto c, auto) { c.setZero(); });
+      }
     }
 
     void add(const Slot& o, int mode) {
       sse += o.sse;
-      if (mode >= 1) { gH += o.gH; gO += o.gO; }
+      if (mode >= 1) {
+        if (fused) { gHp += o.gHp; gOp += o.gOp; }
+        else { gH += o.gH; gO += o.gO; }
+      }
       if (mode == 2) {
         R += o.R;
         C += o.C;
-        if (fused) band(K, o.K, [](auto c, auto oc) { c += oc; });
+        if (fused) { K += o.K; Kh += o.Kh; }
         else band(S, o.S, [](auto c, auto oc) { c += oc; });
       }
     }
@@ -237,18 +285,28 @@ class NormalEquations {
     Index i, h, m;
     Mat A, D, Y, E, G, V;      // h x B, h x B, m x B, m x B, h x B, (h(i+1) + h) x B
     Mat Xs, Ts;                // kSseBlock x i, kSseBlock x m: one block, channel-contiguous
+    Mat Pb;                    // fused: the pair products of one slice (host::jtj_reduced)
+    Vec Wp;                    // fused: host::pad_weights' padded weights
     bool fused;                // double on an AVX2 + FMA CPU: one SYRK gives S, C and R
     Slot part;
 
     Scratch(const Net& n_, Index B)
         : net(n_), i(n_.inputs()), h(n_.hidden()), m(n_.outputs()),
-          A(h, std::max(B, kSseBlock)), D(h, B), Y(m, B), E(m, B), G(h, B),
-          V(fused_path() ? pad4(h) * (i + 1) + pad4(h + 1) : h * (i + 1) + h + 1, B),
-          Xs(kSseBlock, i), Ts(kSseBlock, m), fused(fused_path()), part(n_, fused) {
-      // the fused layout: block l of v at row l hs, a at nz hs, then the row of ones (the row
-      // sums), padding rows zero (never written after this)
+          A(fused_path() ? pad4(h) : h, std::max(B, kSseBlock)), D(h, B), Y(m, B), E(m, B), G(h, B),
+          V(fused_path() ? Lay(n_.inputs(), n_.hidden(), n_.outputs()).rows : h * (i + 1) + h + 1, B),
+          Xs(kSseBlock, i), Ts(kSseBlock, m),
+          Pb(fused_path() ? pairs_h(h) + pairs_z(i + 1) : 0, host::kernel::kPairSlice),
+          Wp(fused_path() ? wp_size(n_) : 0), fused(fused_path()), part(n_, fused) {
+      // the fused layout (Lay): block l of v at row l hs, a at pa, then the row of ones (the
+      // row sums), e, g, x and its row of ones; padding rows zero (never written after this)
       V.setZero();
-      V.row(fused ? pad4(h) * (i + 1) + h : h * (i + 2)).setOnes();
+      if (fused) {
+        const Lay L(i, h, m);
+        V.row(L.pa + h).setOnes();
+        V.row(L.pz + i).setOnes();
+      } else {
+        V.row(h * (i + 2)).setOnes();
+      }
     }
 
     // Mode 0 in double: the SSE by host/kernels.hpp's sse_soa (vectorised forward pass, AVX2 +
@@ -268,7 +326,7 @@ class NormalEquations {
     }
 
     void forward(const Scalar* theta, const ConstMap& X, Index b0, Index nb) {
-      auto a = A.leftCols(nb);
+      Eigen::Map<Mat> a(A.data(), h, nb);  // A has pad4(h) rows on the fused path
       a.noalias() = net.W1(theta) * X.middleCols(b0, nb);
       a.colwise() += net.b1(theta);
       const Activation act = net.activation();
@@ -294,6 +352,25 @@ class NormalEquations {
       const Index P = h * (i + 1);
       const Index B = D.cols();   // A may be wider (the SSE pass's block)
       const Activation act = net.activation();
+      if constexpr (std::is_same<Scalar, double>::value) {
+        if (fused) {  // the hand gradient pass and the reduced J'J kernel
+          const Lay L(i, h, m);
+          host::pad_weights(net, theta, L.hs, L.me, Wp.data());
+          for (Index b0 = lo; b0 < hi; b0 += B) {
+            const Index nb = std::min(B, hi - b0);
+            out.sse += host::grad_block(Wp.data(), i, h, m, L.hs, L.me,
+                                        net.activation() == Activation::Tansig,
+                                        X.data() + b0 * i, T.data() + b0 * m, nb, A.data(),
+                                        out.gHp.data(), L.nzp, out.gOp.data(), L.ha, V.data(),
+                                        V.rows(), L.pa, L.pe, L.pg, L.pz, mode >= 1, mode == 2);
+            if (mode < 2) continue;
+            host::jtj_reduced(out.Kh.data(), out.Kh.rows(), out.K.data(), out.K.rows(),
+                              V.data(), V.rows(), X.data() + b0 * i, i, h, L.hs, L.ha,
+                              i + 1, out.Kh.rows(), out.Kh.cols(), nb, Pb.data());
+          }
+          return;
+        }
+      }
       for (Index b0 = lo; b0 < hi; b0 += B) {
         const Index nb = std::min(B, hi - b0);
         forward(theta, X, b0, nb);
@@ -301,7 +378,7 @@ class NormalEquations {
         e = T.middleCols(b0, nb) - Y.leftCols(nb);
         out.sse += static_cast<double>(e.squaredNorm());
         if (mode == 0) continue;
-        auto a = A.leftCols(nb);
+        Eigen::Map<Mat> a(A.data(), h, nb);
         auto d = D.leftCols(nb);
         d = a.unaryExpr([act](Scalar v) { return activation_slope(act, v); });
         auto g = G.leftCols(nb);
@@ -313,18 +390,6 @@ class NormalEquations {
         out.gO.leftCols(h).noalias() += e * a.transpose();
         out.gO.col(h) += e.rowwise().sum();
         if (mode < 2) continue;
-        if constexpr (std::is_same<Scalar, double>::value) {
-          if (fused) {
-            const Index hs = pad4(h);
-            for (Index l = 0; l < i; ++l)
-              V.block(l * hs, 0, h, nb).array() = d.array().rowwise() * xb.row(l).array();
-            V.block(i * hs, 0, h, nb) = d;
-            V.block((i + 1) * hs, 0, h, nb) = a;
-            host::jtj_blocks_padded(out.K.data(), out.K.rows(), V.data(), V.rows(), hs,
-                                    pad4(h + 1), i + 1, nb);
-            continue;
-          }
-        }
         auto v = V.topLeftCorner(P, nb);
         for (Index l = 0; l < i; ++l)
           v.middleRows(l * h, h).array() = d.array().rowwise() * xb.row(l).array();
@@ -352,7 +417,7 @@ class NormalEquations {
     const auto W2 = net_.W2(theta);
     const Mat Q = W2.transpose() * W2;  // h x h
     // hidden-hidden: S's block (l, l') (l >= l') is symmetric, and only the lower triangle of
-    // each block is read (jtj_blocks computes no more)
+    // each block is read (jtj_reduced computes no more)
     const Index nz = ph / h;
     for (Index l2 = 0; l2 < nz; ++l2)
       for (Index j2 = 0; j2 < h; ++j2) {
