@@ -258,7 +258,8 @@ def register(subparsers) -> None:
                         "flexible_joint): auto tries IDIM-IV and output error (multiple "
                         "shooting from the IDIM-LS estimates) and keeps one only if it predicts "
                         "held-out windows better than IDIM-LS (the choice and its p-values are "
-                        "reported); idim-ls skips them (faster); idim-iv or oe forces one "
+                        "reported; the flight models try IDIM-IV only); idim-ls skips them "
+                        "(faster); idim-iv or oe forces one "
                         "(default: %(default)s)")
     p.add_argument("--output-error", action="store_true",
                    help="force the output-error refinement: the same as --estimator oe")

@@ -267,7 +267,7 @@ def _choose_estimator(model, sig, current: Fit, cv, alpha: float, trim: int,
         best = _FORCED[estimator]
         out = {"chosen": "IDIM-LS", "rule": f"given ({estimator})", "validation": {}}
     else:
-        tried = ["iv", "oe"]
+        tried = list(getattr(model, "auto_estimators", ("iv", "oe")))
         votes = {a: cv.compare((current.effects, model, "idim"), (current.effects, model, a),
                                len(tried), alpha) for a in tried}
         out = {"chosen": "IDIM-LS",

@@ -202,6 +202,8 @@ class GreyBoxModel:
     # above the band that the differentiated positions lost to the derivative filter
     parallel_filter = True
     fixed_bands = False   # True: the documented bands, not a cut-off chosen from the record
+    # the alternatives to IDIM-LS that --estimator auto tries on held-out windows
+    auto_estimators = ("iv", "oe")
     default_cutoff_hz = 100.0
     max_steps = 5
     min_gain = 0.01   # smallest share of the residual SSE an effect must remove to be claimed
