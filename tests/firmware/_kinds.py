@@ -424,3 +424,17 @@ def nanodrone_flight(folder, name):
     a, b = max(ds.segments, key=lambda s: s[1] - s[0])
     return (np.column_stack([ds.column(c) for c in INPUTS])[a:b],
             np.column_stack([ds.column(c) for c in STATES])[a:b])
+
+
+def assert_float32_overflow_refused(model, tmp_path, array_name):
+    """A model whose numbers are finite in the file but not in float32 (set by the caller):
+    load_firmware_model names the array, and export-firmware exits 2 writing nothing."""
+    import pytest
+    from cdam_core import firmware as fw
+    from cdam_core.cli.main import main
+    save_model(tmp_path / "big.json", model)
+    with pytest.raises(ValueError, match=f"{array_name}: not finite in float32"):
+        fw.load_firmware_model(tmp_path / "big.json")
+    assert main(["export-firmware", str(tmp_path / "big.json"), "-o",
+                 str(tmp_path / "m.hpp")]) == 2
+    assert not (tmp_path / "m.hpp").exists()

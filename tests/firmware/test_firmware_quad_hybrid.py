@@ -41,6 +41,7 @@ from quad_generator import TRUTH, flight  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _kinds import header_array as _array, header_int as _int  # noqa: E402
 from _kinds import QUAD_HYBRID_N_FIT as N_FIT, nanodrone_flight, quad_hybrid_file  # noqa: E402
+from _kinds import assert_float32_overflow_refused  # noqa: E402
 
 EPS = 2.0 ** -23
 HOSTILE = '"); system("rm -rf /'
@@ -92,12 +93,7 @@ def test_refusals_are_named(hybrid, tmp_path, monkeypatch):
     m = load_model(hybrid[0])
     m.theta_ = np.array(m.theta_)
     m.theta_[3] = 1e39                      # finite in the file, not in float32
-    save_model(tmp_path / "big.json", m)
-    with pytest.raises(ValueError, match="kNetTheta: not finite in float32"):
-        fw.load_firmware_model(tmp_path / "big.json")
-    assert main(["export-firmware", str(tmp_path / "big.json"), "-o",
-                 str(tmp_path / "m.hpp")]) == 2
-    assert not (tmp_path / "m.hpp").exists()
+    assert_float32_overflow_refused(m, tmp_path, "kNetTheta")
     to_dict = QuadHybrid.to_dict
     monkeypatch.setattr(QuadHybrid, "to_dict", lambda self: {**to_dict(self), "attitude": 1})
     with pytest.raises(ValueError, match="model.attitude: a quad_hybrid option the firmware "

@@ -37,7 +37,7 @@ from cdam_core.record.realdata import shared_data_dir
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _kinds import QUAD_N_FIT as N_FIT, quad_physics_file, quad_twin32  # noqa: E402
 from _kinds import header_array as _array, header_int as _int  # noqa: E402
-from _kinds import nanodrone_flight  # noqa: E402
+from _kinds import assert_float32_overflow_refused, nanodrone_flight  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "models"))
 
@@ -87,12 +87,7 @@ def test_refusals_are_named(quad, tmp_path):
     m = load_model(path)
     m.rot_ = np.array(m.rot_)
     m.rot_[4] = 1e39                    # finite in the file, not in float32
-    save_model(tmp_path / "big.json", m)
-    with pytest.raises(ValueError, match="kRot: not finite in float32"):
-        fw.load_firmware_model(tmp_path / "big.json")
-    assert main(["export-firmware", str(tmp_path / "big.json"), "-o",
-                 str(tmp_path / "m.hpp")]) == 2
-    assert not (tmp_path / "m.hpp").exists()
+    assert_float32_overflow_refused(m, tmp_path, "kRot")
 
 
 def test_an_option_the_firmware_does_not_know_is_named(quad, tmp_path, monkeypatch):
