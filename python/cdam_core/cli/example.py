@@ -146,8 +146,12 @@ def main(argv=None) -> int:
 
     def ticker(what):                             # the seconds elapsed, on a terminal only
         return elapsed_ticker(a, what)
-    path = emps_report(a.out_dir, ticker) if a.example == "emps" else \
-        flight_report(a.out_dir, ticker=ticker)
+    from cdam_core.cli.main import report_failure
+    try:
+        path = emps_report(a.out_dir, ticker) if a.example == "emps" else \
+            flight_report(a.out_dir, ticker=ticker)
+    except (Exception, KeyboardInterrupt) as exc:   # one line and an exit code, as `cdam`
+        return report_failure(f"cdam {a.command}", exc)
     print(f"wrote {path}")
     return 0
 

@@ -144,19 +144,27 @@ def _main(argv: list[str] | None) -> int:
             parser.print_help()
             return 2
         return int(args.func(args) or 0)
-    except KeyboardInterrupt:
-        print(f"{name()}: error: interrupted", file=sys.stderr)
+    except Exception as exc:  # noqa: BLE001 - every failure is one line (report_failure)
+        return report_failure(name(), exc)
+    except KeyboardInterrupt as exc:
+        return report_failure(name(), exc)
+
+
+def report_failure(name: str, exc: BaseException) -> int:
+    """Print the one-line ``NAME: error: ...`` of an exception that ended a command and return
+    its exit code (EXIT_CODES): 130 interrupted, 2 bad input, 3 I/O, 4 a bug."""
+    if isinstance(exc, KeyboardInterrupt):
+        print(f"{name}: error: interrupted", file=sys.stderr)
         return 130
-    except (CliError, OSError, MemoryError, ValueError, ArithmeticError, KeyError, TypeError,
-            UnicodeError, RecursionError) as exc:
+    if isinstance(exc, (CliError, OSError, MemoryError, ValueError, ArithmeticError, KeyError,
+                        TypeError, UnicodeError, RecursionError)):
         msg, code = _message(exc)
         msg = " ".join(str(msg).split())          # one line
-        print(f"{name()}: error: {msg}", file=sys.stderr)
+        print(f"{name}: error: {msg}", file=sys.stderr)
         return code
-    except Exception as exc:  # noqa: BLE001 - a bug; still one line, no traceback
-        msg = " ".join(f"{type(exc).__name__}: {exc}".split())
-        print(f"{name()}: error: internal error ({msg}); please report it", file=sys.stderr)
-        return 4
+    msg = " ".join(f"{type(exc).__name__}: {exc}".split())
+    print(f"{name}: error: internal error ({msg}); please report it", file=sys.stderr)
+    return 4
 
 
 if __name__ == "__main__":

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import scipy.io as sio
 
-from cdam_core.record.realdata import real_record
+from cdam_core.record.realdata import real_record, repo_data_dir, shared_data_dir
 
 NAMES = ("DATA_EMPS", "DATA_EMPS_PULSES")
 
@@ -28,7 +28,12 @@ def load_emps(name: str = "DATA_EMPS", path=None) -> dict:
     """Load an EMPS record (``path`` overrides the shared-data location)."""
     p = Path(path) if path is not None else emps_path(name)
     if not p.is_file():
-        raise FileNotFoundError(f"path: EMPS record not found: {p}")
+        if path is not None:
+            raise FileNotFoundError(f"path: EMPS record not found: {p}")
+        raise FileNotFoundError(
+            f"EMPS record {name}.mat not found in {repo_data_dir() / 'emps'} nor in "
+            f"{shared_data_dir() / 'emps'} (run from the checkout, or set CDAM_SHARED_DATA to "
+            "the folder that holds emps/)")
     try:
         m = sio.loadmat(str(p))
     except Exception as exc:  # scipy raises several types on corrupt files
