@@ -65,7 +65,9 @@ def write_horizon_report(scores, folder, title: str, dt: float | None = None,
     md = [f"# {title}", "", *([intro, ""] if intro else []), horizon_table(scores), "",
           "![RMSE against horizon](rmse_vs_horizon.png)", "",
           "*Figure: root-mean-square error of each output against the prediction horizon, for "
-          "the model and the naive predictor y(t) = y(t - h), on the same rows.*", ""]
+          "the model, the naive predictor y(t) = y(t - h)"
+          + (" and the other predictors of the comparison" if len(scores.rmse) > 2 else "")
+          + ", on the same rows.*", ""]
     if scores.groups:
         marks = _published_marks(scores, 50 * (dt if dt else 1.0)) if published else None
         _panels(folder / "group_mae_vs_horizon.png", x, dt, scores.group_mae,
