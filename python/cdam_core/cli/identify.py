@@ -36,7 +36,8 @@ def register(subparsers) -> None:
                    help="seeds per algorithm (seeds 0..N-1)")
     p.add_argument("--hidden", type=int, default=None,
                    help="hidden units (default: 20; quad_hybrid: the model's default; "
-                        "arx_kstep: 8, evaluate.crossfold.ANCHORED_GRID's)")
+                        "arx_kstep: chosen on validation among evaluate.crossfold.ANCHORED_GRID's "
+                        "structures)")
     p.add_argument("--narx", default=None, help="NARX orders na,nb,nk (default: static map)")
     p.add_argument("--model", default="bp",
                    choices=["bp", "hybrid", "quad_physics", "quad_hybrid", "arx_kstep"],
@@ -55,11 +56,12 @@ def register(subparsers) -> None:
                         "--stride; no smoothing, no algorithm)")
     p.add_argument("--horizon", type=int, default=None,
                    help="quad_hybrid, arx_kstep: steps of each training window (default: "
-                        "quad_hybrid: the model's; arx_kstep: 50, ANCHORED_GRID's)")
+                        "quad_hybrid: the model's; arx_kstep: chosen on validation among "
+                        "ANCHORED_GRID's structures)")
     p.add_argument("--lags", type=int, default=None,
                    help="quad_hybrid: rotor-speed lags the network sees; arx_kstep: "
-                        "input-feature lags (default: quad_hybrid: the model's; arx_kstep: 2, "
-                        "ANCHORED_GRID's)")
+                        "input-feature lags (default: quad_hybrid: the model's; arx_kstep: chosen "
+                        "on validation among ANCHORED_GRID's structures)")
     p.add_argument("--stride", type=int, default=None,
                    help="arx_kstep: samples between training-window starts (default: 100, "
                         "evaluate.crossfold.ANCHORED_FIXED's)")
@@ -356,7 +358,8 @@ def _anchored(args, train, read) -> int:
     print(f"arx_kstep on {len(names)} record(s), {len(train.lengths)} segment(s), "
           f"{len(train.Y)} samples, dt {dt:g} s; validation ({rule}): "
           + ", ".join(Path(v).name for v in vnames))
-    print(f"  ARX orders (na, nb, nk) chosen on validation: {tuple(c['arx_orders'])}")
+    print(f"  ARX orders (na, nb, nk) chosen on validation: {tuple(c['arx_orders'])}"
+          + (f", features {c['anchor_features']}" if "anchor_features" in c else ""))
     print("  validation score (MAE over naive MAE, mean over h = "
           + ", ".join(map(str, fitter.select_horizons))
           + (" and the groups" if groups else " and the outputs") + "): "
@@ -368,9 +371,13 @@ def _anchored(args, train, read) -> int:
         print(f"  chosen: {c['chosen']} (network kept), {c['epochs']} LM epochs (the "
               f"validation flights' best), structure "
               + ", ".join(f"{k} {v}" for k, v in c["structure"].items()))
+    if c.get("blend_weights") is not None:
+        print("  blended per step and group (weights chosen on validation) of: "
+              + ", ".join(c.get("blend_components", [])))
     print(f"  wall time {seconds:.0f} s (selection {c['select_seconds']:.0f} s, final fit on "
           f"all TRAIN {c['fit_seconds']:.0f} s)")
-    choice = {k: c[k] for k in ("arx_orders", "validation", "chosen", "epochs", "structure")}
+    choice = {k: c[k] for k in ("arx_orders", "validation", "chosen", "epochs", "structure",
+                                "anchor_features", "blend_components") if k in c}
     choice["validation"] = {k: v if v != float("inf") else None       # None: diverged
                             for k, v in choice["validation"].items()}
     result = {"kind": type(model).kind, "dt": dt, "train_file": names,
