@@ -109,6 +109,7 @@ def _bad_identify(records, extra):
     (["--model", "arx_kstep", "--stride", "-2"], "--stride: must be"),
     (["--model", "arx_kstep", "--narx", "2,2,1"], "--narx: not used by --model arx_kstep"),
     (["--model", "arx_kstep", "--weighting", "flat"], "--weighting: not used by"),
+    (["--model", "arx_kstep", "--horizon", "5000"], "--horizon: windows of 5000 steps do not"),
     (["--stride", "5"], "--stride: needs --model arx_kstep"),
     (["--validation", "last"], "--validation: needs --model arx_kstep"),
 ])

@@ -344,6 +344,11 @@ def _anchored(args, train, read) -> int:
     sets = dict(inputs=train.inputs, outputs=train.outputs)
     fit = stack_records([ds for i, ds in enumerate(train.datasets) if i not in valid_idx], **sets)
     valid = stack_records([train.datasets[i] for i in valid_idx], **sets)
+    for kw in grid.values():
+        K = int({**fixed, **kw}.get("horizon", 1))
+        if max(fit.lengths) <= K + 1:
+            raise CliError(f"--horizon: windows of {K} steps do not fit in any segment of the "
+                           f"fitted records (the longest has {max(fit.lengths)} samples)")
     fitter = AnchoredFitter(grid=grid, fixed=fixed, groups=groups,
                             **({} if groups else {"blind": ()}))
     t = time.perf_counter()
@@ -363,7 +368,8 @@ def _anchored(args, train, read) -> int:
     print("  validation score (MAE over naive MAE, mean over h = "
           + ", ".join(map(str, fitter.select_horizons))
           + (" and the groups" if groups else " and the outputs") + "): "
-          + ", ".join(f"{k} {v:.4g}" for k, v in c["validation"].items()))
+          + ", ".join(f"{k} {v:.4g}" if v != float("inf") else f"{k} failed (diverged, or "
+                      f"too few windows)" for k, v in c["validation"].items()))
     if c["chosen"] == "arx":
         print("  chosen: the ARX alone (the network did not lower the validation score); "
               "saved as kind arx")
