@@ -76,7 +76,7 @@ def test_evaluate_with_the_arx_baseline(tmp_path, capsys):
     js = json.loads((tmp_path / "e.json").read_text())
     na, nb, nk = js["baselines"]["arx"]["narx"]     # y(t-1), y(t-2) and u(t-2) among its lags
     assert na >= 2 and nk <= 2 <= nk + nb - 1
-    assert js["baselines"]["arx"]["validation"] == str(paths[2])
+    assert js["baselines"]["arx"]["validation"] == [str(paths[2])]
     rm = js["rmse"]
     assert set(rm) == {"model", "naive", "arx"}
     # the generating structure beats the misspecified ARX(1,1,1) and holding the output

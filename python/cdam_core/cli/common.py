@@ -13,7 +13,7 @@ from cdam_core.base.orders import parse_orders
 
 __all__ = ["CliError", "CliIOError", "EXIT_CODES", "CdamParser", "HelpFormatter",
            "add_outputs", "check_io", "parse_narx", "write_json", "warn", "note",
-           "show_progress", "elapsed_ticker"]
+           "show_progress", "elapsed_ticker", "add_validation_option", "validation_rule"]
 
 EXIT_CODES = """exit codes:
   0    done
@@ -206,3 +206,21 @@ def parse_narx(text, option: str = "--narx", allow_none: bool = False):
 def write_json(path, obj) -> None:
     """Strict JSON (NaN/Inf as null), written atomically."""
     write_json_atomic(path, obj)
+
+
+def add_validation_option(p, what: str) -> None:
+    """``--validation {auto,per-type,last}``: which training records validate ``what``
+    (evaluate.baselines.validation_records; one wording for identify and evaluate)."""
+    p.add_argument("--validation", default="auto", choices=["auto", "per-type", "last"],
+                   help=f"which {what}: per-type: the last record by file name of each "
+                        f"trajectory type (the file name's prefix before '_'; cdam identify "
+                        f"--model arx_kstep and cdam evaluate --baselines pick the same, so the "
+                        f"same TRAIN gives the same ARX); last: the last record given; auto: "
+                        f"per-type with --loader nanodrone, else last (default: auto)")
+
+
+def validation_rule(args) -> str:
+    """The rule ``--validation`` names (``auto`` resolved by the loader)."""
+    if args.validation != "auto":
+        return args.validation
+    return "per-type" if args.loader == "nanodrone" else "last"

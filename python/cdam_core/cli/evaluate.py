@@ -4,7 +4,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from cdam_core.cli.common import CliError, check_io, write_json
+from cdam_core.cli.common import (CliError, add_validation_option, check_io, validation_rule,
+                                  write_json)
 
 
 def register(subparsers) -> None:
@@ -39,8 +40,10 @@ def register(subparsers) -> None:
                         "record, start row, start time, horizon, predicted outputs)")
     p.add_argument("--baselines", nargs="+", default=None, metavar="TRAIN",
                    help="also fit the ARX baseline on these training records (orders and delay "
-                        "chosen with the last one as validation, then refitted on all) and "
-                        "score it beside the model and the naive predictor, on the same rows")
+                        "chosen on the validation records --validation picks among them, then "
+                        "refitted on all) and score it beside the model and the naive "
+                        "predictor, on the same rows")
+    add_validation_option(p, "--baselines records validate the ARX orders")
     p.add_argument("--horizon", type=int, default=1,
                    help="largest horizon H in samples (every h in 1..H up to 50, about 30 "
                         "log-spaced above)")
@@ -92,8 +95,17 @@ def run(args) -> int:
     else:
         groups = parse_groups(args.groups, mf.outputs)
     if args.baselines is not None and len(args.baselines) < 2:
-        raise CliError("--baselines: needs at least two training records (the last one "
-                       "validates the ARX orders)")
+        raise CliError("--baselines: needs at least two training records (one validates the "
+                       "ARX orders)")
+    if args.validation != "auto" and not args.baselines:
+        raise CliError("--validation: needs --baselines")
+    rule = validation_rule(args)
+    if args.baselines:
+        from cdam_core.evaluate.baselines import validation_records
+        try:
+            valid_idx = validation_records(args.baselines, rule)
+        except ValueError as exc:
+            raise CliError(f"--validation {rule}: {str(exc).split(': ', 1)[-1]}") from None
     read = dict(inputs=mf.inputs, outputs=mf.outputs, mapping=mapping, nan=args.nan,
                 loader=args.loader)
     st = stack_records(args.records, **read)
@@ -115,7 +127,8 @@ def run(args) -> int:
 
     collected, baseline, first = [], None, 1
     if args.baselines:
-        baseline = _arx_baseline(args.baselines, read, mf.smoothing_passes, groups, horizons)
+        baseline = _arx_baseline(args.baselines, valid_idx, rule, read, mf.smoothing_passes, groups,
+                                 horizons)
         first = max(mf.model.t0, baseline[0].t0)
     scores = score_horizons(mf.model, U, Y, mf.outputs, horizons, segments=lengths,
                             free_run=not args.no_free_run, progress=progress, groups=groups,
@@ -138,17 +151,27 @@ def run(args) -> int:
         write_predictions(args.predictions, st, collected, mapping)
     if args.json:
         write_json(args.json, js)
+    from cdam_core.evaluate.published import GROUPS as PUBLISHED_GROUPS
+    published = [g.name for g in groups] == list(PUBLISHED_GROUPS)   # the benchmark's groups
+    head = (f"{mf.kind} model {args.model} on {len(st.names)} record(s) in {len(lengths)} "
+            f"segment(s), {sum(lengths)} samples")
+    if baseline:
+        head += (f"; ARX baseline: orders (na, nb, nk) {tuple(baseline[1]['narx'])} chosen on "
+                 f"{', '.join(Path(p).name for p in baseline[1]['validation'])} "
+                 f"({rule}), refitted on the {len(args.baselines)} --baselines records")
     if args.report:
         from cdam_core.report.horizons import write_horizon_report
         write_horizon_report(scores, args.report, f"{Path(args.model).name} ({mf.kind})",
-                             dt=dts[0])
+                             dt=dts[0], published=published, intro=head)
     from cdam_core.report.horizons import horizon_table
-    print(f"{mf.kind} model {args.model} on {len(st.names)} record(s) in {len(lengths)} "
-          f"segment(s), {sum(lengths)} samples")
+    print(head)
     print(horizon_table(scores))
     if groups:
         from cdam_core.report.horizons import group_table
         print(group_table(scores))
+    if published:
+        from cdam_core.report.horizons import published_table
+        print(published_table())
     for name, fr in scores.free_run.items():
         if "status" in fr:
             print(f"free run ({name}): {fr['status']}: {fr['reason']}")
@@ -167,18 +190,22 @@ def _smoothed(st, passes):
     return U, Y
 
 
-def _arx_baseline(paths, read, passes, groups, horizons):
-    """(ARX model, JSON) of the baseline: orders chosen with the last record as validation
-    (evaluate.baselines.select_arx), preprocessed as the model's training data."""
+def _arx_baseline(paths, valid_idx, rule, read, passes, groups, horizons):
+    """(ARX model, JSON) of the baseline: orders chosen with the records ``valid_idx`` of
+    ``paths`` as validation (evaluate.baselines.select_arx), preprocessed as the model's
+    training data."""
     from dataclasses import replace
 
     from cdam_core.evaluate.baselines import select_arx
     from cdam_core.record.stack import stack_records
-    fit, valid = (stack_records(x, **read) for x in (paths[:-1], paths[-1:]))
+    fits = [p for i, p in enumerate(paths) if i not in valid_idx]
+    valids = [paths[i] for i in valid_idx]
+    fit, valid = (stack_records(x, **read) for x in (fits, valids))
     fit, valid = (replace(st, U=u, Y=y) for st, (u, y) in
                   ((fit, _smoothed(fit, passes)), (valid, _smoothed(valid, passes))))
     sel = [h for h in (1, 10, 25, 50) if h <= horizons[-1]]
     model, orders, val = select_arx(fit, valid, horizons=sel, groups=groups)
-    return model, {"kind": "arx", "narx": list(orders), "train": [str(p) for p in paths[:-1]],
-                   "validation": str(paths[-1]), "selection_horizons": sel,
+    return model, {"kind": "arx", "narx": list(orders), "train": [str(p) for p in fits],
+                   "validation": [str(p) for p in valids], "validation_rule": rule,
+                   "selection_horizons": sel,
                    "validation_scores": {",".join(map(str, k)): v for k, v in val.items()}}

@@ -3,8 +3,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from cdam_core.cli.common import (CliError, check_io, note, parse_narx, show_progress,
-                                  write_json)
+from cdam_core.cli.common import (CliError, add_validation_option, check_io, note, parse_narx,
+                                  show_progress, validation_rule, write_json)
 
 
 def register(subparsers) -> None:
@@ -35,10 +35,12 @@ def register(subparsers) -> None:
     p.add_argument("--seeds", type=int, default=1,
                    help="seeds per algorithm (seeds 0..N-1)")
     p.add_argument("--hidden", type=int, default=None,
-                   help="hidden units (default: 20; quad_hybrid: the model's default)")
+                   help="hidden units (default: 20; quad_hybrid: the model's default; "
+                        "arx_kstep: chosen on validation among evaluate.crossfold.ANCHORED_GRID's "
+                        "structures)")
     p.add_argument("--narx", default=None, help="NARX orders na,nb,nk (default: static map)")
     p.add_argument("--model", default="bp",
-                   choices=["bp", "hybrid", "quad_physics", "quad_hybrid"],
+                   choices=["bp", "hybrid", "quad_physics", "quad_hybrid", "arx_kstep"],
                    help="bp: the paper's network (static or NARX); hybrid: linear ARX with the "
                         "algorithm's network on its residual (needs --narx); quad_physics: "
                         "the quadrotor rigid body on its 4 rotor speeds (rad/s) and 13 states, "
@@ -46,11 +48,26 @@ def register(subparsers) -> None:
                         "models/flight/physics.py); quad_hybrid: quad_physics with a "
                         "recurrent network on its rate residual trained by LM on the k-step "
                         "error (models/flight/hybrid.py; --hidden, --horizon, --lags, --epochs, "
-                        "--weighting, --rates as its prior)")
+                        "--weighting, --rates as its prior); arx_kstep: a least-squares ARX "
+                        "(orders chosen on validation records) with a recurrent network on "
+                        "the residual of its k-step rollout, kept only where it beats the ARX "
+                        "on the validation records (models/arx_kstep.py, evaluate/crossfold.py "
+                        "AnchoredFitter; --validation, --hidden, --lags, --horizon, --epochs, "
+                        "--stride; no smoothing, no algorithm)")
     p.add_argument("--horizon", type=int, default=None,
-                   help="quad_hybrid: steps of each training window (default: the model's)")
+                   help="quad_hybrid, arx_kstep: steps of each training window (default: "
+                        "quad_hybrid: the model's; arx_kstep: chosen on validation among "
+                        "ANCHORED_GRID's structures)")
     p.add_argument("--lags", type=int, default=None,
-                   help="quad_hybrid: rotor-speed lags the network sees (default: the model's)")
+                   help="quad_hybrid: rotor-speed lags the network sees; arx_kstep: "
+                        "input-feature lags (default: quad_hybrid: the model's; arx_kstep: chosen "
+                        "on validation among ANCHORED_GRID's structures)")
+    p.add_argument("--stride", type=int, default=None,
+                   help="arx_kstep: samples between training-window starts (default: 100, "
+                        "evaluate.crossfold.ANCHORED_FIXED's)")
+    add_validation_option(p, "TRAIN records validate arx_kstep's choices (the ARX orders, "
+                             "the network's structure and epoch count, whether it is kept; "
+                             "then it is refitted on all TRAIN)")
     p.add_argument("--weighting", default=None, choices=["flat", "naive"],
                    help="quad_hybrid: the steps' errors alike, or each over the naive "
                         "predictor's error at that step (default: the model's)")
@@ -67,7 +84,8 @@ def register(subparsers) -> None:
     p.add_argument("--iterations", type=int, default=50, help="Tmax of the optimisers")
     p.add_argument("--population", type=int, default=20, help="g (butterflies) and CABC Np")
     p.add_argument("--epochs", type=int, default=None,
-                   help="LM epochs at most (default: 50; quad_hybrid: the model's)")
+                   help="LM epochs at most (default: 50; quad_hybrid: the model's; arx_kstep: "
+                        "20, ANCHORED_FIXED's: the validation records' best epoch is kept)")
     p.add_argument("--goal", type=float, default=0.003, help="LM goal (training MSE)")
     p.add_argument("--report", default=None, help="folder for report.md and PNG figures")
     p.add_argument("--json", default=None, help="write the results as JSON")
@@ -94,11 +112,19 @@ def run(args) -> int:
     mapping = parse_column_map(args.map, "--map")
     read = dict(mapping=mapping, nan=args.nan, loader=args.loader)
     train = stack_records(args.train, inputs=args.inputs, outputs=args.outputs, **read)
+    if args.model == "arx_kstep":
+        return _anchored(args, train, read)
+    for name in ("stride",):
+        if getattr(args, name) is not None:
+            raise CliError(f"--{name}: needs --model arx_kstep")
+    if args.validation != "auto":
+        raise CliError("--validation: needs --model arx_kstep (other kinds: --validate FILE)")
     if args.model in ("quad_physics", "quad_hybrid"):
         return _physics(args, train, read)
     for name in ("horizon", "lags", "weighting"):
         if getattr(args, name) is not None:
-            raise CliError(f"--{name}: needs --model quad_hybrid")
+            raise CliError(f"--{name}: needs --model quad_hybrid or arx_kstep"
+                           if name != "weighting" else f"--{name}: needs --model quad_hybrid")
     args.hidden = 20 if args.hidden is None else args.hidden
     args.epochs = 50 if args.epochs is None else args.epochs
     if len(train.lengths) > 1 and not args.test:
@@ -174,13 +200,8 @@ def _physics(args, train, read) -> int:
     """``--model quad_physics`` / ``quad_hybrid``: fit on every training record (segments kept
     apart), print the parameters with their standard deviations, score a --test record at
     h = 1, 10, 50 beside the naive predictor, save."""
-    import numpy as np
-
-    from cdam_core.evaluate.groups import NANODRONE_GROUPS
-    from cdam_core.evaluate.horizons import score_horizons
     from cdam_core.models.flight.hybrid import QuadHybrid
     from cdam_core.models.flight.physics import STATES, QuadPhysics
-    from cdam_core.record.stack import stack_records
 
     kind = args.model
     if len(train.inputs) != 4 or list(train.outputs) != list(STATES):
@@ -189,9 +210,7 @@ def _physics(args, train, read) -> int:
                        f"{', '.join(train.inputs)}; outputs {', '.join(train.outputs)})")
     if args.split is not None:
         raise CliError(f"--model {kind}: give --test records instead of --split")
-    dts = [float(np.median(np.diff(ds.t))) for ds in train.datasets if len(ds.t) > 1]
-    if not dts or max(dts) / min(dts) - 1 > 0.01:
-        raise CliError("TRAIN: the records are not sampled at one rate")
+    dts = _one_rate(train)
     try:
         if kind == "quad_physics":
             model = QuadPhysics(dt=dts[0], rates=args.rates)
@@ -221,21 +240,156 @@ def _physics(args, train, read) -> int:
         print(f"  k-step LM: {len(model.history_['mse']) - 1} epochs, weighted k-step mse "
               f"{model.history_['mse'][0]:.4g} -> {model.history_['mse'][-1]:.4g} "
               f"({model.history_['stop']})")
+    return _finish(args, model, train, read, result, {"train": [str(x) for x in args.train]})
+
+
+def _finish(args, model, train, read, result, meta) -> int:
+    """The flight kinds' common end: score --test, write --json, save (with ``meta``)."""
     if args.test:
-        te = stack_records([args.test], inputs=train.inputs, outputs=train.outputs, **read)
-        hs = [h for h in (1, 10, 50) if h + model.t0 < max(te.lengths)]
-        if not hs:
-            raise CliError(f"--test: {args.test} is too short to score")
-        sc = score_horizons(model, te.U, te.Y, te.outputs, hs, segments=te.lengths,
-                            free_run=False, groups=list(NANODRONE_GROUPS))
-        from cdam_core.report.horizons import group_table
-        print(group_table(sc, at=hs))
-        result["test"] = {"file": str(args.test), **sc.to_json()}
+        result["test"] = _score_test(args, model, train, read)
     if args.json:
         write_json(args.json, result)
     if args.save:
         from cdam_core.models.file import save_model
-        save_model(args.save, model, inputs=train.inputs, outputs=train.outputs,
-                   meta={"train": [str(x) for x in args.train]})
+        save_model(args.save, model, inputs=train.inputs, outputs=train.outputs, meta=meta)
         note(args, f"model: {args.save}")
     return 0
+
+
+def _one_rate(train) -> list[float]:
+    """The records' sampling intervals (s); CliError unless they share one rate."""
+    import numpy as np
+    dts = [float(np.median(np.diff(ds.t))) for ds in train.datasets if len(ds.t) > 1]
+    if not dts or max(dts) / min(dts) - 1 > 0.01:
+        raise CliError("TRAIN: the records are not sampled at one rate")
+    return dts
+
+
+def _flight_groups(outputs) -> list:
+    """The nano-drone benchmark's output groups when every one of their columns is an output,
+    else none (each output scored alone)."""
+    from cdam_core.evaluate.groups import NANODRONE_GROUPS
+    groups = list(NANODRONE_GROUPS)
+    return groups if all(c in outputs for g in groups for c in g.columns) else []
+
+
+def _score_test(args, model, train, read) -> dict:
+    """Scores of ``model`` on the --test record at h = 1, 10, 50 (those it is long enough
+    for) beside the naive predictor; the group table printed."""
+    from cdam_core.evaluate.horizons import score_horizons
+    from cdam_core.record.stack import stack_records
+    from cdam_core.report.horizons import group_table, horizon_table
+
+    te = stack_records([args.test], inputs=train.inputs, outputs=train.outputs, **read)
+    hs = [h for h in (1, 10, 50) if h + model.t0 < max(te.lengths)]
+    if not hs:
+        raise CliError(f"--test: {args.test} is too short to score")
+    groups = _flight_groups(te.outputs)
+    sc = score_horizons(model, te.U, te.Y, te.outputs, hs, segments=te.lengths,
+                        free_run=False, groups=groups)
+    print(group_table(sc, at=hs) if groups else horizon_table(sc, at=hs))
+    return {"file": str(args.test), **sc.to_json()}
+
+
+#: the command-line options passed to the anchored model (AnchoredFitter's ``fixed``; an option
+#: given overrides the structure grid's value too): one entry per ArxKStep argument offered
+ANCHORED_OPTIONS = ("hidden", "lags", "horizon", "epochs", "stride")
+
+
+def _anchored(args, train, read) -> int:
+    """``--model arx_kstep``: the validation records chosen from TRAIN by ``--validation``;
+    ``evaluate.crossfold.AnchoredFitter`` chooses the ARX orders, the network's structure and
+    epoch count, and whether the network is kept, on them, then refits on all TRAIN; prints
+    the choices and their validation scores, scores a --test record, saves (kind arx_kstep, or
+    arx when the network is not kept)."""
+    import time
+
+    from cdam_core.evaluate.baselines import validation_records
+    from cdam_core.evaluate.crossfold import ANCHORED_FIXED, ANCHORED_GRID, AnchoredFitter
+    from cdam_core.models.arx_kstep import ArxKStep
+    from cdam_core.record.stack import stack_records
+
+    why = {"split": "give --test records instead",
+           "narx": "arx_kstep chooses the ARX orders on the validation records",
+           "weighting": "arx_kstep weighs each step's error over the ARX's there",
+           "validate": "arx_kstep takes its validation records from TRAIN (--validation)"}
+    for name, reason in why.items():
+        if getattr(args, name) is not None:
+            raise CliError(f"--{name}: not used by --model arx_kstep: {reason}")
+    if args.features != "raw":
+        raise CliError("--features physics: needs --model hybrid")
+    dt = _one_rate(train)[0]
+    rule = validation_rule(args)
+    try:
+        valid_idx = validation_records(train.names, rule)
+    except ValueError as exc:
+        raise CliError(f"--validation {rule}: {str(exc).split(': ', 1)[-1]}") from None
+    groups = _flight_groups(train.outputs)
+    given = {k: getattr(args, k) for k in ANCHORED_OPTIONS if getattr(args, k) is not None}
+    # physics features of the network's inputs: four rotor speeds of a flight; others raw
+    fixed = {**ANCHORED_FIXED, **({} if groups and len(train.inputs) == 4 else
+                                  {"net_features": "raw"}), **given}
+    grid = {}
+    for name, kw in ANCHORED_GRID.items():
+        over = [k for k in kw if k in given]     # the grid's values the options replace
+        kw = {k: v for k, v in kw.items() if k not in given}
+        if kw not in grid.values():
+            grid[name + "".join(f" {k} {given[k]}" for k in over)] = kw
+    for kw in grid.values():                      # the options' values checked before training
+        try:
+            ArxKStep(**{**fixed, **kw})
+        except ValueError as exc:
+            raise CliError(f"--{str(exc).split(':')[0]}: {str(exc).split(': ', 1)[-1]}") \
+                from None
+    sets = dict(inputs=train.inputs, outputs=train.outputs)
+    fit = stack_records([ds for i, ds in enumerate(train.datasets) if i not in valid_idx], **sets)
+    valid = stack_records([train.datasets[i] for i in valid_idx], **sets)
+    for kw in grid.values():
+        K = int({**fixed, **kw}.get("horizon", 1))
+        if max(fit.lengths) <= K + 1:
+            raise CliError(f"--horizon: windows of {K} steps do not fit in any segment of the "
+                           f"fitted records (the longest has {max(fit.lengths)} samples)")
+    fitter = AnchoredFitter(grid=grid, fixed=fixed, groups=groups,
+                            **({} if groups else {"blind": ()}))
+    t = time.perf_counter()
+    try:
+        model = fitter(train, fit, valid)
+    except ValueError as exc:
+        raise CliError(f"TRAIN: {exc}") from None
+    seconds = time.perf_counter() - t
+    c = fitter.choices[-1]
+    names = [str(x) for x in args.train]
+    vnames = [names[i] for i in valid_idx]
+    print(f"arx_kstep on {len(names)} record(s), {len(train.lengths)} segment(s), "
+          f"{len(train.Y)} samples, dt {dt:g} s; validation ({rule}): "
+          + ", ".join(Path(v).name for v in vnames))
+    print(f"  ARX orders (na, nb, nk) chosen on validation: {tuple(c['arx_orders'])}"
+          + (f", features {c['anchor_features']}" if "anchor_features" in c else ""))
+    print("  validation score (MAE over naive MAE, mean over h = "
+          + ", ".join(map(str, fitter.select_horizons))
+          + (" and the groups" if groups else " and the outputs") + "): "
+          + ", ".join(f"{k} {v:.4g}" if v != float("inf") else f"{k} failed (diverged, or "
+                      f"too few windows)" for k, v in c["validation"].items()))
+    if c["chosen"] == "arx":
+        print("  chosen: the ARX alone (the network did not lower the validation score); "
+              "saved as kind arx")
+    else:
+        print(f"  chosen: {c['chosen']} (network kept), {c['epochs']} LM epochs (the "
+              f"validation flights' best), structure "
+              + ", ".join(f"{k} {v}" for k, v in c["structure"].items()))
+    if c.get("blend_weights") is not None:
+        print("  blended per step and group (weights chosen on validation) of: "
+              + ", ".join(c.get("blend_components", [])))
+    print(f"  wall time {seconds:.0f} s (selection {c['select_seconds']:.0f} s, final fit on "
+          f"all TRAIN {c['fit_seconds']:.0f} s)")
+    choice = {k: c[k] for k in ("arx_orders", "validation", "chosen", "epochs", "structure",
+                                "anchor_features", "blend_components") if k in c}
+    choice["validation"] = {k: v if v != float("inf") else None       # None: diverged
+                            for k, v in choice["validation"].items()}
+    result = {"kind": type(model).kind, "dt": dt, "train_file": names,
+              "validation_rule": rule, "validation_files": vnames,
+              "grid": grid, "fixed": fixed, "choice": choice, "seconds": seconds,
+              "select_seconds": c["select_seconds"], "fit_seconds": c["fit_seconds"],
+              "training": c["history"], "validation_history": c["validation_history"]}
+    return _finish(args, model, train, read, result, {
+        "train": names, "validation_rule": rule, "validation": vnames, "choice": choice})

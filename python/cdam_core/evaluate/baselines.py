@@ -27,9 +27,44 @@ from cdam_core.models.arx import ArxModel
 from cdam_core.models.protocol import segment_bounds
 from cdam_core.preprocess import smooth_pair
 
-__all__ = ["persistence", "naive_and_arx", "select_arx", "relative_error", "ARX_GRID"]
+__all__ = ["persistence", "naive_and_arx", "select_arx", "relative_error", "ARX_GRID",
+           "validation_records", "VALIDATION_RULES"]
 
 ARX_GRID = tuple((na, nb, nk) for na in (1, 2, 3) for nb in (1, 2, 3) for nk in (1, 2))
+
+
+#: how training records are split into fit and validation records (``validation_records``)
+VALIDATION_RULES = ("per-type", "last")
+
+
+def validation_records(names, rule: str = "per-type") -> list[int]:
+    """Indices of the training records that validate (the others are fitted), chosen by rule,
+    never by hand: ``"per-type"``: the last record (by file name) of each type, the type being
+    the file name's prefix before the first '_' (``square_20251017_run3`` -> ``square``: the
+    nano-drone flights' naming; the cross-trajectory protocol's split,
+    ``evaluate.crossfold``); ``"last"``: the last record given. ValueError when no record is
+    left to fit."""
+    from pathlib import Path
+
+    from cdam_core.record.realdata.nanodrone import trajectory_type
+
+    names = [str(n) for n in names]
+    if rule not in VALIDATION_RULES:
+        raise ValueError(f"rule: unknown {rule!r}; use {' or '.join(VALIDATION_RULES)}")
+    if len(names) < 2:
+        raise ValueError(f"records: {len(names)} given; at least two are needed (one fitted, "
+                         f"one validating)")
+    if rule == "last":
+        return [len(names) - 1]
+    last = {}
+    for i in sorted(range(len(names)), key=lambda i: Path(names[i]).name):
+        last[trajectory_type(names[i])] = i
+    valid = sorted(last.values())
+    if len(valid) == len(names):
+        raise ValueError(f"records: every record is the only one of its type "
+                         f"({', '.join(sorted(last))}), so none is left to fit; give more "
+                         f"records per type, or use the rule 'last'")
+    return valid
 
 
 def persistence(segments, names, rate: float, horizons=()) -> tuple[dict, dict]:

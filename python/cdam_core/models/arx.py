@@ -186,7 +186,9 @@ class ArxModel(Model):
                 "feature_scale": None if self.feature_scale_ is None else
                 [float(v) for v in self.feature_scale_],
                 "coef": [[float(v) for v in row] for row in self.coef_],
-                "coef_std": [[float(v) for v in row] for row in self.coef_std_]}
+                "coef_std": [[float(v) for v in row] for row in self.coef_std_],
+                "y_start": None if getattr(self, "y_start_", None) is None else
+                [float(v) for v in self.y_start_]}
 
     @classmethod
     def from_dict(cls, d: dict) -> "ArxModel":
@@ -207,3 +209,6 @@ class ArxModel(Model):
         rows = self.orders.na * self.n_outputs_ + self.orders.nb * self.n_features + 1
         self.coef_ = field_array(d["coef"], "model.coef", (rows, self.n_outputs_))
         self.coef_std_ = field_array(d["coef_std"], "model.coef_std", (rows, self.n_outputs_))
+        # where predict(U) alone starts a free run (the training mean; absent in older files)
+        if d.get("y_start") is not None:
+            self.y_start_ = field_array(d["y_start"], "model.y_start", (self.n_outputs_,))

@@ -49,27 +49,39 @@ def group_table(scores, at=(1, 10, 25, 50)) -> str:
 
 
 def write_horizon_report(scores, folder, title: str, dt: float | None = None,
-                         units: dict | None = None, logy: bool = False) -> Path:
+                         units: dict | None = None, logy: bool = False,
+                         published: bool = False, intro: str | None = None) -> Path:
     """``index.md``, ``index.html`` and ``rmse_vs_horizon.png`` (one panel per output) in
-    ``folder``; ``logy``: logarithmic error axes (predictors that differ by decades)."""
+    ``folder``; ``logy``: logarithmic error axes (predictors that differ by decades);
+    ``published``: the groups are the nano-drone benchmark's: its published table on the page
+    and its models' MAE at h = 50 marked on the per-group plot; ``intro``: a paragraph under
+    the title."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     units = {**STANDARD_UNITS, **(units or {})}      # the dataset format's, else given
     x = np.asarray(scores.horizons, dtype=float) * (dt if dt else 1.0)
     _panels(folder / "rmse_vs_horizon.png", x, dt, scores.rmse,
             [f"RMSE {o} [{units.get(o, 'output units')}]" for o in scores.outputs], logy)
-    md = [f"# {title}", "", horizon_table(scores), "",
+    md = [f"# {title}", "", *([intro, ""] if intro else []), horizon_table(scores), "",
           "![RMSE against horizon](rmse_vs_horizon.png)", "",
           "*Figure: root-mean-square error of each output against the prediction horizon, for "
-          "the model and the naive predictor y(t) = y(t - h), on the same rows.*", ""]
+          "the model, the naive predictor y(t) = y(t - h)"
+          + (" and the other predictors of the comparison" if len(scores.rmse) > 2 else "")
+          + ", on the same rows.*", ""]
     if scores.groups:
+        marks = _published_marks(scores, 50 * (dt if dt else 1.0)) if published else None
         _panels(folder / "group_mae_vs_horizon.png", x, dt, scores.group_mae,
-                [f"MAE {g.name} [{_unit(g)}]" for g in scores.groups], logy)
+                [f"MAE {g.name} [{_unit(g)}]" for g in scores.groups], logy, marks=marks)
         md += ["## Per group (the nano-drone benchmark's metrics)", "", group_table(scores), "",
                "![MAE per group against horizon](group_mae_vs_horizon.png)", "",
                "*Figure: mean error per group against the prediction horizon (Euclidean norm of "
                "the group's error vector; attitude as the quaternion geodesic angle), for every "
-               "predictor of the comparison, on the same rows.*", ""]
+               "predictor of the comparison, on the same rows"
+               + ("; the markers at h = 50: the published models' MAE on the benchmark's own "
+                  "test trajectory type (not these records; table below)" if marks else "")
+               + ".*", ""]
+        if published:
+            md += ["## Published", "", published_table(), ""]
     return write_page(folder / "index.md", md, title)
 
 
@@ -77,35 +89,48 @@ def _unit(group) -> str:
     return "rad" if group.kind != "vector" else GROUP_UNITS.get(group.name, "output units")
 
 
-def _panels(path, x, dt, series: dict, ylabels: list[str], logy: bool = False) -> None:
+def _published_marks(scores, x50) -> dict:
+    """{published model: (x, [MAE at h = 50 per group of ``scores``])} (evaluate.published)."""
+    from cdam_core.evaluate.published import NANODRONE_PUBLISHED
+    return {f"{name} (published)": (x50, [row[g.name][0] for g in scores.groups])
+            for name, row in NANODRONE_PUBLISHED.items()}
+
+
+def _panels(path, x, dt, series: dict, ylabels: list[str], logy: bool = False,
+            marks: dict | None = None) -> None:
     """One panel per column of the (H, k) arrays of ``series`` (predictor -> array); more
     than 10 predictors get distinct colours (tab20's ten dark ones, then its light ones) and the
-    legend goes beside the panels."""
+    legend goes beside the panels. ``marks``: {name: (x, [value per panel])}, single points
+    drawn as grey markers (e.g. published figures at one horizon)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     k = len(ylabels)
     many = len(series) > 10
+    beside = many or bool(marks)
     tab = plt.get_cmap("tab20").colors
     colours = list(tab[0::2]) + list(tab[1::2]) if many else [None] * len(series)
-    fig, axes = plt.subplots(k, 1, figsize=(8.4 if many else 6.4, 2.2 * k + 0.6),
+    fig, axes = plt.subplots(k, 1, figsize=(8.4 if beside else 6.4, 2.2 * k + 0.6),
                              squeeze=False, sharex=True)
     for j, (ax, label) in enumerate(zip(axes[:, 0], ylabels)):
         for c, (name, A) in enumerate(series.items()):
             ax.plot(x, A[:, j], marker="." if len(x) < 60 else None, label=name,
                     color=colours[c % len(colours)])
+        for c, (name, (xm, values)) in enumerate((marks or {}).items()):
+            ax.plot([xm], [values[j]], linestyle="none", marker="os^vDP*X"[c % 8],
+                    color="0.45", markerfacecolor="none", label=name)
         ax.set_ylabel(label)
         if logy:
             ax.set_yscale("log")
         ax.grid(True, alpha=0.3)
-    if many:
+    if beside:
         axes[0, 0].legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
     else:
         axes[0, 0].legend(loc="upper left", fontsize=8)
     axes[-1, 0].set_xlabel("horizon [s]" if dt else "horizon [samples]")
     fig.tight_layout()
     with atomic_target(path) as tmp:
-        fig.savefig(tmp, dpi=110)
+        fig.savefig(tmp, dpi=110, **({"bbox_inches": "tight"} if beside else {}))
     plt.close(fig)
 
 
