@@ -235,3 +235,29 @@ def test_without_held_out_blocks_a_link_only_effect_is_not_claimed():
     sel = select(m, sig, [CoulombFriction("tau_l")], free_run=False, estimator="idim-ls",
                  held_out=False)
     assert sel.steps == []
+
+
+class _BoundedJoint(EIVJoint):
+    """A lower bound on the link inertia above its unconstrained estimate (0.089)."""
+
+    bounds = {**EIVJoint.bounds, "I": (0.095, float("inf"))}
+
+
+def test_bounded_refit_keeps_the_stages():
+    """A second-stage bound is active: the first stage is untouched, the second refitted with
+    I at its bound (plain numpy: the link equation with I held too)."""
+    m0, sig = _prepared("plain")
+    m = _BoundedJoint()
+    f = fit(m, sig, (), TRIM, bounded=True)
+    assert f.violations == ["I"] and f.theta["I"] == pytest.approx(0.095)
+    ref, _, _ = _numpy_two_stage(m0, sig)
+    for p in MOTOR:
+        assert f.theta[p] == pytest.approx(ref[p], rel=1e-6), p
+    y, X, names = _columns(m0, sig)["tau_l"]
+    fixed = {p: ref[p] for p in ("Ks", "Kd")} | {"I": 0.095}
+    held = [j for j, p in enumerate(names) if p in fixed]
+    free = [j for j, p in enumerate(names) if p not in fixed]
+    rhs = y - X[:, held] @ np.array([fixed[names[j]] for j in held])
+    sol = dict(zip([names[j] for j in free], np.linalg.lstsq(X[:, free], rhs, rcond=None)[0]))
+    for p in ("Dl", "G"):
+        assert f.theta[p] == pytest.approx(sol[p], rel=1e-5), p

@@ -25,7 +25,9 @@ simulated signals are noise-free, so they need no filter). Rows at rest are left
 IDIM-LS (``moving_rows``). The iteration stops when every estimate moves by less than a tenth of
 its standard deviation, or after ``MAX_ITERATIONS``. Covariance: the IV formula
 s^2 (Z'W)^-1 Z'Z (Z'W)^-T with s^2 the residual variance (white-residual assumption, as
-optimistic as IDIM-LS's).
+optimistic as IDIM-LS's). A model with errors-in-variables equations is estimated in IDIM-LS's
+two stages (:func:`~cdam_core.models.greybox.estimation.stage_split`), the second stage's
+covariance carrying the first's.
 """
 from __future__ import annotations
 

@@ -9,6 +9,12 @@ residual), each equation's rows are multiplied by its weight, so a noisy equatio
 equations of the flight model, whose body accelerations are twice-differentiated position
 noise) does not bias the parameters it shares with a clean one (the cable stiffness in the
 motor equation). The residuals stay in physical units; :attr:`Fit.sse` is the weighted sum.
+Two stages (a model's ``eiv_equations``, errors-in-variables equations: the flight model's link
+equations): in a block that holds them beside clean equations, the parameters with a column in
+a clean equation are estimated from the clean equations alone, then the EIV equations estimate
+the remaining parameters with those held (lexicographic least squares, the limit of the
+weighted stack as the EIV weight tends to 0; :func:`stage_split`); sums of squares over clean
+and EIV equations together read the clean ones (:meth:`Fit.wsse`).
 Free run: integrate the same equations forward from the measured inputs alone (semi-implicit
 Euler, ``substeps`` per sample chosen so that h * |lambda|max <= 0.5 for the linearised model).
 """
