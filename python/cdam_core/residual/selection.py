@@ -499,6 +499,13 @@ def select(model, sig: dict, candidates, alpha: float = 0.01, max_steps: int | N
                 "residual_structure_explained_by_the_model": at_model,
                 "alpha": alpha, "min_gain": min_gain, "trim": trim, "lags": lags, "min_prominence_decades": min_prominence,
                 "candidates": [c.key for c in candidates]}
+    eiv = [e for e in getattr(model, "eiv_equations", ()) if e in current.residuals]
+    if eiv:   # estimation.stage_split: the errors-in-variables equations' second stage
+        settings["two_stage"] = {
+            "errors_in_variables_equations": eiv,
+            "rule": "parameters with a column in a clean equation estimated from the clean "
+                    "equations alone; the errors-in-variables equations estimate the rest with "
+                    "those held; an effect changing only them is claimed on held-out data only"}
     return Selection(model, declared, current, steps, declared_error, white, unexplained,
                      settings, store, final_error, removed)
 
