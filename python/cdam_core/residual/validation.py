@@ -219,6 +219,11 @@ class BlockedCV:
         for k in range(self.folds):
             a, b = int(self.edges[k]), int(self.edges[k + 1])
             starts = self.starts[k]
+            if reason and estimator != "idim":
+                # an estimator that failed on one fold already loses (compare: a structure
+                # that cannot be scored on every window loses); its other folds cost seconds
+                out.append(np.full(starts.size, np.nan))
+                continue
             mask = np.ones(n, dtype=bool)
             mask[max(0, a - self.guard):min(n, b + self.guard)] = False
             try:
