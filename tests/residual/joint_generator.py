@@ -10,7 +10,9 @@ friction, a hardening cable and a periodic disturbance torque on the link.
 
 Motor:  Im thm'' + Dm thm' + Fc tanh(thm' / v_s) + tau_l = tau_m
 Cable:  tau_l = Ks d + K3 d^3 + Kd d',  d = thm - q
-Link:   I q'' + Dl q' + G sin q = tau_l + A sin(2 pi f t)
+Link:   I q'' + Dl q' + Fcl tanh(q' / v_s) + G sin q = tau_l + A sin(2 pi f t) + w(t)
+
+(w: an unmeasured link torque given per sample, ``link_torque``; Fcl: link-side dry friction.)
 
 The dry friction uses a steep tanh (v_s = 1 mrad/s) so RK4 stays smooth; the identified model's
 plain sign differs from it only below v_s.
@@ -41,6 +43,8 @@ class Joint:
     Fc: float = 0.0                 # motor dry friction, N m
     K3: float = 0.0                 # hardening cable, N m / rad^3
     periodic: tuple = ()            # (amplitude N m, frequency Hz) on the link
+    Fc_link: float = 0.0            # link-side dry friction, N m (steep tanh as the motor's)
+    link_torque: tuple = ()         # an unmeasured torque on the link, N m per sample (held)
     substeps: int = 4
     hold: bool = True               # False (open loop only): a continuous torque, sampled
     seed: int = 0
@@ -52,7 +56,7 @@ class Joint:
         return out
 
     # -- the plant --------------------------------------------------------------------------
-    def _deriv(self, x, u, t):
+    def _deriv(self, x, u, t, extra=0.0):
         p = self.params
         thm, q, vm, vq = x
         d, dd = thm - q, vm - vq
@@ -61,7 +65,8 @@ class Joint:
         dist = self.periodic[0] * math.sin(2 * math.pi * self.periodic[1] * t) \
             if self.periodic else 0.0
         am = (u - p["Dm"] * vm - self.Fc * math.tanh(vm / 1e-3) - tl) / p["Im"]
-        aq = (tl - p["Dl"] * vq - g * math.sin(q) + dist) / p["I"]
+        aq = (tl - p["Dl"] * vq - self.Fc_link * math.tanh(vq / 1e-3) - g * math.sin(q) + dist
+              + extra) / p["I"]
         return (vm, vq, am, aq)
 
     def _measure(self, x, counts, noise, rng):
@@ -111,10 +116,11 @@ class Joint:
                     u0, um, u1 = (0.6 * float(np.sum(np.sin(2 * np.pi * freqs * tt + ph)
                                                      / (1 + freqs)))
                                   for tt in (tk, tk + 0.5 * h, tk + h))
-                k1 = self._deriv(x, u0, tk)
-                k2 = self._deriv([a + 0.5 * h * b for a, b in zip(x, k1)], um, tk + 0.5 * h)
-                k3 = self._deriv([a + 0.5 * h * b for a, b in zip(x, k2)], um, tk + 0.5 * h)
-                k4 = self._deriv([a + h * b for a, b in zip(x, k3)], u1, tk + h)
+                w = float(self.link_torque[k]) if len(self.link_torque) else 0.0
+                k1 = self._deriv(x, u0, tk, w)
+                k2 = self._deriv([a + 0.5 * h * b for a, b in zip(x, k1)], um, tk + 0.5 * h, w)
+                k3 = self._deriv([a + 0.5 * h * b for a, b in zip(x, k2)], um, tk + 0.5 * h, w)
+                k4 = self._deriv([a + h * b for a, b in zip(x, k3)], u1, tk + h, w)
                 x = [a + h / 6.0 * (b1 + 2 * b2 + 2 * b3 + b4)
                      for a, b1, b2, b3, b4 in zip(x, k1, k2, k3, k4)]
                 hist_q.append(x[1])

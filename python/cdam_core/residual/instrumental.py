@@ -25,13 +25,15 @@ simulated signals are noise-free, so they need no filter). Rows at rest are left
 IDIM-LS (``moving_rows``). The iteration stops when every estimate moves by less than a tenth of
 its standard deviation, or after ``MAX_ITERATIONS``. Covariance: the IV formula
 s^2 (Z'W)^-1 Z'Z (Z'W)^-T with s^2 the residual variance (white-residual assumption, as
-optimistic as IDIM-LS's).
+optimistic as IDIM-LS's). A model with errors-in-variables equations is estimated in IDIM-LS's
+two stages (:func:`~cdam_core.models.greybox.estimation.stage_split`), the second stage's
+covariance carrying the first's.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from cdam_core.models.greybox.estimation import Fit, design
+from cdam_core.models.greybox.estimation import Fit, design, stage_split
 from cdam_core.residual.benchmark import greybox_of
 from cdam_core.residual.output_error import refined_fit
 
@@ -58,6 +60,20 @@ def _stack(model, s, eqs, est, rows, weights):
         ys.append(w * yy[rows])
         Ws.append(w * W[rows])
     return np.concatenate(ys), np.vstack(Ws)
+
+
+def _iv(y, W, Z) -> tuple:
+    """The IV estimate solving Z'W th = Z'y, its covariance s^2 (Z'W)^-1 Z'Z (Z'W)^-T and
+    (Z'W)^-1."""
+    ZW = Z.T @ W
+    if not np.all(np.isfinite(ZW)) or np.linalg.cond(ZW) > 1e12:
+        raise ValueError("instruments: Z'W is singular (the auxiliary model does not "
+                         "excite every parameter)")
+    th = np.linalg.solve(ZW, Z.T @ y)
+    e = y - W @ th
+    s2 = float(e @ e) / max(y.size - W.shape[1], 1)
+    Zi = np.linalg.inv(ZW)
+    return th, s2 * Zi @ (Z.T @ Z) @ Zi.T, Zi
 
 
 def _simulated_signals(fitted: Fit, sig, U, horizon: int, trim: int):
@@ -124,18 +140,27 @@ def iv_fit(fitted: Fit, sig, U, horizon: int, trim: int, rows=None) -> tuple[Fit
         r = use & covered
         if int(r.sum()) <= 2 * len(est):
             raise ValueError(f"rows: {int(r.sum())} rows left for the instruments")
-        y, W = _stack(model, s_meas, eqs_meas, est, r, weights)
         _, eqs_sim = design(model, sim, effects)
-        _, Z = _stack(model, sim, eqs_sim, est, r, weights)
-        ZW = Z.T @ W
-        if not np.all(np.isfinite(ZW)) or np.linalg.cond(ZW) > 1e12:
-            raise ValueError("instruments: Z'W is singular (the auxiliary model does not "
-                             "excite every parameter)")
-        th = np.linalg.solve(ZW, Z.T @ y)
-        e = y - W @ th
-        s2 = float(e @ e) / max(y.size - len(est), 1)
-        Zi = np.linalg.inv(ZW)
-        cov = s2 * Zi @ (Z.T @ Z) @ Zi.T
+        split = stage_split(model, eqs_meas, est)
+        if split is None:
+            y, W = _stack(model, s_meas, eqs_meas, est, r, weights)
+            _, Z = _stack(model, sim, eqs_sim, est, r, weights)
+            th, cov, _ = _iv(y, W, Z)
+        else:   # two stages, as IDIM-LS (estimation.stage_split)
+            clean, eiv, first, second = split
+            i1 = np.array([est.index(p) for p in first], dtype=int)
+            i2 = np.array([est.index(p) for p in second], dtype=int)
+            y, W = _stack(model, s_meas, {e: eqs_meas[e] for e in clean}, est, r, weights)
+            _, Z = _stack(model, sim, {e: eqs_sim[e] for e in clean}, est, r, weights)
+            th, cov = np.zeros(len(est)), np.zeros((len(est), len(est)))
+            th[i1], C1, _ = _iv(y, W[:, i1], Z[:, i1])
+            cov[np.ix_(i1, i1)] = C1
+            if i2.size:
+                y, W = _stack(model, s_meas, {e: eqs_meas[e] for e in eiv}, est, r, weights)
+                _, Z = _stack(model, sim, {e: eqs_sim[e] for e in eiv}, est, r, weights)
+                th[i2], C2, Zi = _iv(y - W[:, i1] @ th[i1], W[:, i2], Z[:, i2])
+                G = Zi @ (Z[:, i2].T @ W[:, i1])   # the first stage carried through (LS's rule)
+                cov[np.ix_(i2, i2)] = C2 + G @ C1 @ G.T
         new = dict(zip(est, map(float, th)))
         std = {p: float(np.sqrt(max(cov[j, j], 0.0))) for j, p in enumerate(est)}
         moved = max(abs(new[p] - theta[p]) / std[p] if std[p] > 0 else 0.0 for p in est)

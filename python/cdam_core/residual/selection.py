@@ -47,7 +47,8 @@ class Candidate:
     @property
     def significant(self) -> bool:
         """The equation-error statistics alone (used when held-out validation is unavailable)."""
-        return bool(self.pvalue < self._alpha and self.dbic < 0 and self.gain >= self._min_gain)
+        return bool(self.pvalue < self._alpha and self.dbic < 0 and self.gain >= self._min_gain
+                    and self._in_sample_ok)
 
     @property
     def screened(self) -> bool:
@@ -56,6 +57,7 @@ class Candidate:
 
     _alpha: float = 0.01
     _min_gain: float = 0.01
+    _in_sample_ok: bool = True   # False: only errors-in-variables equations change (compare)
 
 
 @dataclass
@@ -98,11 +100,21 @@ def _fit_with(model, sig, effects, eff, trim, base=None):
     if not hi > lo:
         return eff, fit(model, sig, effects + (eff,), trim, base)
     grid = np.linspace(lo, hi, int(getattr(eff, "search_grid", 13)))
-    sse = [fit(model, sig, effects + (eff.with_value(x),), trim, base).sse for x in grid]
+    fits = [fit(model, sig, effects + (eff.with_value(x),), trim, base) for x in grid]
+    sse = [f.sse for f in fits]
+    eiv = [e for e in getattr(model, "eiv_equations", ()) if e in fits[0].residuals]
+
+    # the clean equations do not see it: the EIV ones decide (the two-stage objective's
+    # second key, Fit._stage)
+    second = bool(eiv) and len(set(sse)) == 1
+
+    def objective(f):
+        return f.wsse(eiv) if second else f.sse
+    sse = [objective(f) for f in fits]
     i = int(np.argmin(sse))
     a, b = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
     res = optimize.minimize_scalar(
-        lambda x: fit(model, sig, effects + (eff.with_value(x),), trim, base).sse,
+        lambda x: objective(fit(model, sig, effects + (eff.with_value(x),), trim, base)),
         bounds=(a, b), method="bounded", options={"xatol": (hi - lo) * 1e-4})
     x = res.x if res.fun < sse[i] else grid[i]
     e = eff.with_value(x)
@@ -150,10 +162,11 @@ def compare(model, sig, current: Fit, f1: Fit, eff, alpha: float = 0.01,
                   float(n_eff), float(tau))
     c._alpha = alpha
     c.gain = gain / sse0 if sse0 > 0 else 0.0
-    eiv = set(getattr(model, "eiv_equations", ()))
-    if eiv and set(eqs) <= eiv:   # only errors-in-variables equations: see eiv_min_gain
-        min_gain = max(min_gain, float(getattr(model, "eiv_min_gain", min_gain)))
     c._min_gain = min_gain
+    eiv = set(getattr(model, "eiv_equations", ()))
+    # only errors-in-variables equations: the in-sample statistics do not decide (the mismatch
+    # of such an equation correlates with any velocity-shaped column); held-out data do
+    c._in_sample_ok = not (eiv and set(eqs) <= eiv)
     c.equations = eqs
     return c
 
@@ -486,6 +499,13 @@ def select(model, sig: dict, candidates, alpha: float = 0.01, max_steps: int | N
                 "residual_structure_explained_by_the_model": at_model,
                 "alpha": alpha, "min_gain": min_gain, "trim": trim, "lags": lags, "min_prominence_decades": min_prominence,
                 "candidates": [c.key for c in candidates]}
+    eiv = [e for e in getattr(model, "eiv_equations", ()) if e in current.residuals]
+    if eiv:   # estimation.stage_split: the errors-in-variables equations' second stage
+        settings["two_stage"] = {
+            "errors_in_variables_equations": eiv,
+            "rule": "parameters with a column in a clean equation estimated from the clean "
+                    "equations alone; the errors-in-variables equations estimate the rest with "
+                    "those held; an effect changing only them is claimed on held-out data only"}
     return Selection(model, declared, current, steps, declared_error, white, unexplained,
                      settings, store, final_error, removed)
 

@@ -120,7 +120,9 @@ class BlockedCV:
 
     def __init__(self, model, sig: dict, trim: int, folds: int = FOLDS,
                  horizon: int | None = None, declared=None, guard: int | None = None,
-                 integrator: str = WINDOW_INTEGRATOR):
+                 integrator: str = WINDOW_INTEGRATOR, criterion: str | None = None):
+        if criterion not in (None, "simulation", "equation"):
+            raise ValueError(f"criterion: expected 'simulation' or 'equation', got {criterion!r}")
         if integrator not in ("euler", "rk4"):
             raise ValueError(f"integrator: expected 'euler' or 'rk4', got {integrator!r}")
         self.integrator = integrator
@@ -155,6 +157,11 @@ class BlockedCV:
         self.eq_norm = {}
         if declared is not None:
             self.eq_norm = {eq: max(float(np.var(r)), 1e-300) for eq, r in declared.residuals.items()}
+        if criterion is not None:   # given (the equation criterion needs ``declared``)
+            if criterion == "equation" and declared is None:
+                raise ValueError("criterion: 'equation' needs the declared fit")
+            self.criterion = criterion
+        elif declared is not None:
             # the rule reads windows from the measured state (no initial state fitted)
             e0, _ = self.scores(declared.effects, fit_state=False)
             self.declared_window_score = float(np.mean(e0)) if np.all(np.isfinite(e0)) \
@@ -212,6 +219,11 @@ class BlockedCV:
         for k in range(self.folds):
             a, b = int(self.edges[k]), int(self.edges[k + 1])
             starts = self.starts[k]
+            if reason and estimator != "idim":
+                # an estimator that failed on one fold already loses (compare: a structure
+                # that cannot be scored on every window loses); its other folds cost seconds
+                out.append(np.full(starts.size, np.nan))
+                continue
             mask = np.ones(n, dtype=bool)
             mask[max(0, a - self.guard):min(n, b + self.guard)] = False
             try:

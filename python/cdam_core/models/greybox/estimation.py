@@ -9,6 +9,12 @@ residual), each equation's rows are multiplied by its weight, so a noisy equatio
 equations of the flight model, whose body accelerations are twice-differentiated position
 noise) does not bias the parameters it shares with a clean one (the cable stiffness in the
 motor equation). The residuals stay in physical units; :attr:`Fit.sse` is the weighted sum.
+Two stages (a model's ``eiv_equations``, errors-in-variables equations: the flight model's link
+equations): in a block that holds them beside clean equations, the parameters with a column in
+a clean equation are estimated from the clean equations alone, then the EIV equations estimate
+the remaining parameters with those held (lexicographic least squares, the limit of the
+weighted stack as the EIV weight tends to 0; :func:`stage_split`); sums of squares over clean
+and EIV equations together read the clean ones (:meth:`Fit.wsse`).
 Free run: integrate the same equations forward from the measured inputs alone (semi-implicit
 Euler, ``substeps`` per sample chosen so that h * |lambda|max <= 0.5 for the linearised model).
 """
@@ -195,17 +201,27 @@ class Fit:
             hit = self._squares[id(a)] = (a, np.sum(a ** 2))
         return hit[1]
 
+    def _stage(self, equations) -> list:
+        """``equations`` as the two-stage (lexicographic) objective reads them: where they hold
+        clean equations, the model's errors-in-variables equations are left out (they
+        estimate nothing the clean ones determine: the limit of a vanishing EIV weight, to
+        first order); EIV equations alone are read as they are."""
+        eqs = list(self.residuals if equations is None else equations)
+        eiv = set(getattr(self.model, "eiv_equations", ()) or ())
+        clean = [e for e in eqs if e not in eiv]
+        return clean if clean and eiv else eqs
+
     def wsse(self, equations=None) -> float:
-        """Weighted sum of squared residuals over ``equations`` (default: all)."""
-        eqs = self.residuals if equations is None else equations
+        """Weighted sum of squared residuals over ``equations`` (default: all; see
+        :meth:`_stage` for a model with errors-in-variables equations)."""
         return float(sum(self.weights.get(e, 1.0) ** 2 * self._sq(self.residuals[e])
-                         for e in eqs))
+                         for e in self._stage(equations)))
 
     def wref(self, equations=None) -> float:
-        """Weighted sum of squares of the reference signals over ``equations``."""
-        eqs = self.references if equations is None else equations
+        """Weighted sum of squares of the reference signals over ``equations`` (as
+        :meth:`wsse`)."""
         return float(sum(self.weights.get(e, 1.0) ** 2 * self._sq(self.references[e])
-                         for e in eqs))
+                         for e in self._stage(equations)))
 
     @property
     def sse(self) -> float:
@@ -363,8 +379,10 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None,
                 continue
         index = {p: j for j, p in enumerate(ps_all)}
         k = len(ps_all)
-        A = np.zeros((k, k))
-        b = np.zeros(k)
+        # two stages when the block holds errors-in-variables equations beside clean ones
+        split = stage_split(model, {eq: eqs[eq] for eq in comp}, ps_all)
+        A = np.zeros((2, k, k))   # normal equations of the clean [0] and the EIV [1] rows
+        b = np.zeros((2, k))
         blocks = []
         for eq in comp:
             y, cols = eqs[eq]
@@ -379,13 +397,20 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None,
             ix = np.array([index[p] for p in ps], dtype=int)
             w2 = weights.get(eq, 1.0) ** 2
             Xu, yu = (X, y) if use is None else (X[use], y[use])
-            A[np.ix_(ix, ix)] += w2 * XtX
-            b[ix] += w2 * np.einsum("ij,i->j", Xu, yu)
+            st = int(split is not None and eq in split[1])
+            A[st][np.ix_(ix, ix)] += w2 * XtX
+            b[st, ix] += w2 * np.einsum("ij,i->j", Xu, yu)
             blocks.append((eq, y, X, ix))
-        scale = np.sqrt(np.diag(A)).copy()
+        scale = np.sqrt(np.diag(A[0] + A[1])).copy()
         scale[scale == 0] = 1.0
-        As = A / np.outer(scale, scale)
-        th = np.linalg.lstsq(As, b / scale, rcond=None)[0] / scale if k else np.zeros(0)
+        if split is None:
+            A, b = A[0] + A[1], b[0] + b[1]
+            As = A / np.outer(scale, scale)
+            th = np.linalg.lstsq(As, b / scale, rcond=None)[0] / scale if k else np.zeros(0)
+        else:
+            i1 = np.array([index[p] for p in split[2]], dtype=int)
+            i2 = np.array([index[p] for p in split[3]], dtype=int)
+            th = _two_stage(A, b, scale, i1, i2)
         lo = np.array([bounds.get(p, (-np.inf, np.inf))[0] for p in ps_all])
         hi = np.array([bounds.get(p, (-np.inf, np.inf))[1] for p in ps_all])
         # a violation counts beyond rounding: in the unit-norm column scaling, further outside
@@ -397,21 +422,35 @@ def fit(model, sig: dict, effects=(), trim: int = 50, base: "Fit | None" = None,
         unconstrained.update(unc_b)
         violations += bad
         if bad and bounded:   # refit this block with the bounds (bounded linear least squares)
-            th = _bounded([(eq, y, X, ix) if use is None else (eq, y[use], X[use], ix)
-                           for eq, y, X, ix in blocks], weights, k, scale, lo, hi)
+            ub = [(eq, y, X, ix) if use is None else (eq, y[use], X[use], ix)
+                  for eq, y, X, ix in blocks]
+            if split is None:
+                th = _bounded(ub, weights, k, scale, lo, hi)
+            else:   # stage by stage, each with its parameters' bounds
+                th = np.zeros(k)
+                th[i1] = _bounded(_restrict([u for u in ub if u[0] not in split[1]], i1, th),
+                                  weights, i1.size, scale[i1], lo[i1], hi[i1])
+                if i2.size:
+                    th[i2] = _bounded(_restrict([u for u in ub if u[0] in split[1]], i2, th),
+                                      weights, i2.size, scale[i2], lo[i2], hi[i2])
         cond_b = None
         if k:
-            sv = np.sqrt(np.maximum(np.linalg.eigvalsh(As)[::-1], 0.0))
-            cond_b = float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf")
+            parts = [A] if split is None else [A[0][np.ix_(i1, i1)], A[1][np.ix_(i2, i2)]]
+            sc = [scale] if split is None else [scale[i1], scale[i2]]
+            cond_b = max(_cond(P / np.outer(c, c)) for P, c in zip(parts, sc) if c.size)
             conds.append(cond_b)
         theta.update(zip(ps_all, map(float, th)))
-        wsse, rows = 0.0, 0
+        wsse, rows = np.zeros(2), np.zeros(2, dtype=int)
         for eq, y, X, ix in blocks:
             resid[eq] = y - np.einsum("ij,j->i", X, th[ix])
             ru = resid[eq] if use is None else resid[eq][use]
-            wsse += weights.get(eq, 1.0) ** 2 * float(ru @ ru)
-            rows += ru.size
-        std.update(_std(As, scale, wsse, rows, ps_all))
+            st = int(split is not None and eq in split[1])
+            wsse[st] += weights.get(eq, 1.0) ** 2 * float(ru @ ru)
+            rows[st] += ru.size
+        if split is None:
+            std.update(_std(As, scale, float(wsse.sum()), int(rows.sum()), ps_all))
+        else:
+            std.update(_two_stage_std(A, scale, i1, i2, wsse, rows, ps_all))
         for j, p in enumerate(ps_all):   # at an active bound the covariance formula does not hold
             if bad and bounded and (th[j] <= lo[j] or th[j] >= hi[j]):
                 std[p] = float("nan")
@@ -448,6 +487,92 @@ def _columns(eq, ps, cols, n, keep, rows, use, sigs, gram) -> tuple:
     out = (X, np.einsum("ij,ik->jk", Xu, Xu))
     if key is not None:
         gram[0].put(key, (), out + (gram[2],))
+    return out
+
+
+def stage_split(model, eqs: dict, est) -> tuple | None:
+    """The two stages of a block of equations (the model's ``eiv_equations``: errors-in-variables
+    equations, whose regressors hold noisy twice-differentiated signals): ``(clean equations,
+    EIV equations, first-stage parameters, second-stage parameters)``, or None when the block
+    has no EIV equation, no clean one, or they share no estimated parameter (one stage is then
+    the same). First stage: every estimated parameter with a column in a clean equation,
+    estimated from the clean equations alone; second stage: the rest, from the EIV equations
+    with the first stage's values held (:func:`fit`)."""
+    eiv_all = set(getattr(model, "eiv_equations", ()) or ())
+    eiv = [eq for eq in eqs if eq in eiv_all]
+    clean = [eq for eq in eqs if eq not in eiv_all]
+    if not eiv or not clean:
+        return None
+    first = [p for p in est if any(p in eqs[eq][1] for eq in clean)]
+    if not any(p in eqs[eq][1] for eq in eiv for p in first):
+        return None
+    return clean, eiv, first, [p for p in est if p not in first]
+
+
+def _solve(A, b, scale) -> np.ndarray:
+    """Least squares from normal equations on unit-norm columns (numpy's lstsq, its default
+    singular-value cut: a parameter the rows do not determine gets the minimum-norm value)."""
+    if A.shape[0] == 0:
+        return np.zeros(0)
+    return np.linalg.lstsq(A / np.outer(scale, scale), b / scale, rcond=None)[0] / scale
+
+
+def _two_stage(A, b, scale, i1, i2) -> np.ndarray:
+    """Lexicographic least squares: the first-stage parameters ``i1`` from the clean rows'
+    normal equations ``A[0], b[0]``, then the second-stage ``i2`` from the EIV rows' ``A[1],
+    b[1]`` with the first stage held (module docstring of :mod:`.flight`, ``eiv_equations``)."""
+    th = np.zeros(scale.size)
+    th[i1] = _solve(A[0][np.ix_(i1, i1)], b[0][i1], scale[i1])
+    if i2.size:
+        rhs = b[1][i2] - A[1][np.ix_(i2, i1)] @ th[i1]
+        th[i2] = _solve(A[1][np.ix_(i2, i2)], rhs, scale[i2])
+    return th
+
+
+def _cov(A, scale) -> np.ndarray:
+    """(Phi'W Phi)^-1 from the normal matrix ``A`` through its unit-norm column scaling."""
+    return np.linalg.pinv(A / np.outer(scale, scale), hermitian=True) / np.outer(scale, scale)
+
+
+def _two_stage_std(A, scale, i1, i2, wsse, rows, names) -> dict:
+    """Standard deviations of the two-stage estimate. First stage: the least-squares formula on
+    the clean rows (s1^2 from their weighted SSE over rows - k1). Second stage: its own
+    least-squares term s2^2 M^-1 (M the EIV rows' normal matrix of the second-stage parameters)
+    plus the first stage's uncertainty carried through the held values, G C1 G' with
+    G = M^-1 A21 (Murphy and Topel's two-step correction, the two stages' errors taken as
+    independent: different equations, different noise)."""
+    out = {}
+    k1, k2 = i1.size, i2.size
+    if rows[0] <= k1:
+        return {p: float("nan") for p in names}
+    C1 = wsse[0] / (rows[0] - k1) * _cov(A[0][np.ix_(i1, i1)], scale[i1])
+    cov = np.zeros((scale.size, scale.size))
+    cov[np.ix_(i1, i1)] = C1
+    if k2:
+        Mi = _cov(A[1][np.ix_(i2, i2)], scale[i2])
+        G = Mi @ A[1][np.ix_(i2, i1)]
+        s2 = wsse[1] / (rows[1] - k2) if rows[1] > k2 else float("nan")
+        cov[np.ix_(i2, i2)] = s2 * Mi + G @ C1 @ G.T
+    d = np.diag(cov)
+    for j, p in enumerate(names):
+        out[p] = float(np.sqrt(d[j])) if d[j] > 0 else float("nan")
+    return out
+
+
+def _cond(As) -> float:
+    sv = np.sqrt(np.maximum(np.linalg.eigvalsh(As)[::-1], 0.0))
+    return float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf")
+
+
+def _restrict(blocks, sel, th) -> list:
+    """Rows of ``blocks`` ((eq, y, X, ix) over a block's parameters) for the parameters ``sel``
+    only, the other parameters' columns moved to the left side at their values in ``th``."""
+    pos = {int(j): i for i, j in enumerate(sel)}
+    out = []
+    for eq, y, X, ix in blocks:
+        inside = np.array([int(j) in pos for j in ix], dtype=bool)
+        y2 = y - X[:, ~inside] @ th[ix[~inside]] if (~inside).any() else y
+        out.append((eq, y2, X[:, inside], np.array([pos[int(j)] for j in ix[inside]], dtype=int)))
     return out
 
 
@@ -490,11 +615,8 @@ def set_equation_weights(sig: dict, fitted: Fit) -> dict:
     pos = [v for v in rms.values() if v > 0]
     floor = min(pos) if pos else 1.0
     w = {eq: floor / max(v, floor) for eq, v in rms.items()}
-    # errors-in-variables equations (regressors built from noisy twice-differentiated signals)
-    # get a further factor: parameters they share with clean equations come from the clean ones
-    for eq in getattr(fitted.model, "eiv_equations", ()):
-        if eq in w:
-            w[eq] *= float(getattr(fitted.model, "eiv_weight", 1.0))
+    # (errors-in-variables equations need no further factor: :func:`fit` solves them in a
+    # second stage, see :func:`stage_split`)
     if not hasattr(sig, "weights"):
         raise ValueError("sig: expected prepared signals (a Signals from model.prepare)")
     sig.weights = w
