@@ -1,6 +1,7 @@
 // Smallest image with a dynamic model (arx, hybrid, greybox): startup + one step per loop on
-// volatile inputs (and the residual monitor with a correct, when the model file has one),
-// the measured row observed (arm_coupling's columns), nothing else. Its text/data/bss are the "model plus step" figures.
+// volatile inputs (and the residual monitor with a correct, when the model file has one), the
+// measured row observed (fw::StepModel::observe: arm_coupling's columns), nothing else. Its
+// text/data/bss are the "model plus step" figures.
 #include "fw/step_model.hpp"
 #include "fw/monitor.hpp"
 
