@@ -28,9 +28,15 @@ def _record(seed=0):
 
 
 def _sos():
-    # the board's coefficients: float32 numbers (causal.arm_sos rounds them too)
-    return (sps.butter(4, 8.0, fs=1 / DT, output="sos").astype(np.float32).astype(float),
-            sps.butter(4, 80.0, fs=1 / DT, output="sos").astype(np.float32).astype(float))
+    """The two bands as the board holds them (causal.arm_sections: b0 b1 b2 1 alpha1 alpha2)."""
+    return ca.arm_sections(4, 8.0, DT), ca.arm_sections(4, 80.0, DT)
+
+
+def _as_sos(sec):
+    """scipy's sections of the same filter: a1 = alpha1 - 2, a2 = alpha2 - alpha1 + 1."""
+    sos = np.array(sec, dtype=float)
+    sos[:, 4], sos[:, 5] = sec[:, 4] - 2.0, sec[:, 5] - sec[:, 4] + 1.0
+    return sos
 
 
 def _trajectories(raw):
@@ -43,7 +49,7 @@ def _trajectories(raw):
         d = np.r_[0.0, np.diff(a)]
         if n == "psi":
             d = (d + np.pi) % (2 * np.pi) - np.pi
-        p = sps.sosfilt(bs if n in ("phi", "theta", "psi", "X", "Y", "Z") else js, d)
+        p = sps.sosfilt(_as_sos(bs if n in ("phi", "theta", "psi", "X", "Y", "Z") else js), d)
         c = np.r_[0.0, p[:-1]]
         v = np.r_[a[:1], a[:-1]]
         out[n] = (v - c, v, v + p)
@@ -134,18 +140,18 @@ def test_no_row_depends_on_a_later_row():
 
 def test_float32_error_is_at_the_columns_rounding_level():
     """The same formulas in float32 (what the board computes) against float64 on the same
-    float32 record and coefficients: within 1e-4 of each column's RMS (measured 6.7e-5: the
-    float32 Butterworth sections' own rounding, poles within 0.05 of 1), while the plain
-    second difference w[k] - 2 w[k-1] + w[k-2] of float32 values w errs by eps |w| / dt^2
-    (3.1e-3 of the RMS on these strongly excited signals, 1e6 eps |w| / RMS in general)."""
+    float32 record and coefficients: within 2e-5 of each column's RMS (measured 6.6e-6; with
+    scipy's direct form II transposed in float32 instead of the increment form, 6.7e-5: poles
+    within 0.05 of 1), while the plain second difference w[k] - 2 w[k-1] + w[k-2] of float32
+    values w errs by eps |w| / dt^2 (3.2e-3 of the RMS on these strongly excited signals,
+    1e6 eps |w| / RMS in general)."""
     raw = _record(3)
     bs, js = _sos()
     ref = ca.arm_columns(raw, DT, bs, js, ("X", "Y", "Z"), 9.81)
     raw32 = {n: v.astype(np.float32) for n, v in raw.items()}
     ref32in = ca.arm_columns({n: v.astype(np.float64) for n, v in raw32.items()}, DT, bs, js,
                              ("X", "Y", "Z"), 9.81)
-    got = ca.arm_columns(raw32, np.float32(DT), bs.astype(np.float32), js.astype(np.float32),
-                         ("X", "Y", "Z"), np.float32(9.81))
+    got = ca.arm_columns(raw32, np.float32(DT), bs, js, ("X", "Y", "Z"), np.float32(9.81))
     tr = _trajectories({n: v.astype(np.float64) for n, v in raw32.items()})
     worst_jet, worst_plain = 0.0, np.inf
     for i, ch in enumerate("XYZ"):
@@ -163,13 +169,28 @@ def test_float32_error_is_at_the_columns_rounding_level():
         worst_plain = min(worst_plain, np.max(np.abs(plain - ref32in[ch]["c0"])) / rms0)
     print(f"float32 error / column RMS: jets {worst_jet:.2e}, plain second difference "
           f"{worst_plain:.2e}")
-    assert worst_jet < 1e-4
-    assert worst_plain > 10 * worst_jet
+    assert worst_jet < 2e-5
+    assert worst_plain > 100 * worst_jet
     # the float32 record's rounding itself moves the float64 columns by less than that
     for ch in "XYZ":
         for name in ("c0", "c1", "c2"):
             rms = np.sqrt(np.mean(ref[ch][name] ** 2))
             assert np.max(np.abs(ref[ch][name] - ref32in[ch][name])) < 1e-2 * rms
+
+
+def test_sections_are_the_butterworth_and_the_increment_form_its_recursion():
+    """arm_sections is scipy's Butterworth to float32 precision (relative, also in alpha1 and
+    alpha2); the board's increment form (delta_sosfilt, float64 here) runs the same recursion
+    as scipy's sosfilt on those numbers."""
+    ref = sps.butter(4, 8.0, fs=1 / DT, output="sos")
+    sec = ca.arm_sections(4, 8.0, DT)
+    np.testing.assert_allclose(sec[:, :3], ref[:, :3], rtol=1e-7)
+    np.testing.assert_allclose(sec[:, 4], ref[:, 4] + 2, rtol=1e-7)
+    np.testing.assert_allclose(sec[:, 5], 1 + ref[:, 4] + ref[:, 5], rtol=1e-7)
+    x = np.random.default_rng(4).standard_normal(2000) * 1e-3
+    want = sps.sosfilt(_as_sos(sec), x)
+    np.testing.assert_allclose(ca.delta_sosfilt(sec, x), want, rtol=0,
+                               atol=1e-12 * np.max(np.abs(want)))
 
 
 def test_bad_channel_and_cutoff_are_named():
@@ -178,4 +199,4 @@ def test_bad_channel_and_cutoff_are_named():
     with pytest.raises(ValueError, match="channel: arm_coupling has no channel 'q1'"):
         ca.arm_columns(raw, DT, bs, js, ("q1",), 9.81)
     with pytest.raises(ValueError, match="cutoff_hz: 600 Hz is not below the Nyquist"):
-        ca.arm_sos(4, 600.0, DT)
+        ca.arm_sections(4, 600.0, DT)

@@ -2,7 +2,7 @@
 // rows (cdam_core.models.greybox.causal: the float64 reference, and the derivation):
 // per measured signal (phi theta psi X Y Z q1 q2) its increments d = a(t) - a(t-1) (psi's
 // wrapped to (-pi, pi]) and d2 = d(t) - d(t-1) through the Butterworth low-pass (second-order
-// sections, direct form II transposed as scipy.signal.sosfilt, started at rest): p = LP(d),
+// sections in the output's increments, started at rest): p = LP(d),
 // s = LP(d2); the jet (v, p, c, s) = (a(t-1), p(t), p(t-1), s(t)) is the local trajectory
 // (v - c, v, v + p); sums, products, sines and cosines of jets keep every part free of
 // cancellation, so the force columns (second differences over dt^2, 1e6 x at 1 kHz) round at
@@ -88,14 +88,21 @@ class ArmColumns {
  private:
   static constexpr float kPi = 3.14159265358979f;
 
-  // scipy.signal.sosfilt's direct form II transposed, section by section
-  static float filter(const float* sos, float (*z)[2], float x) {
+  // section by section in the output's increments (causal.delta_sosfilt): y = -a1 y1 - a2 y2
+  // + N written as dy = (dy1 - alpha1 dy1) - alpha2 y2 + N, y = y1 + dy, alpha1 = a1 + 2,
+  // alpha2 = 1 + a1 + a2 (small, kept to float32's relative precision); state per section
+  // x1 x2 y1 dy1
+  static float filter(const float* sos, float (*z)[4], float x) {
     for (int q = 0; q < kSections; ++q) {
-      const float* c = &sos[q * 6];   // b0 b1 b2 a0 a1 a2
-      const float y = c[0] * x + z[q][0];
-      z[q][0] = (c[1] * x - c[4] * y) + z[q][1];
-      z[q][1] = c[2] * x - c[5] * y;
-      x = y;
+      const float* c = &sos[q * 6];   // b0 b1 b2 1 alpha1 alpha2
+      float* s = z[q];
+      const float n = (c[0] * x + c[1] * s[0]) + c[2] * s[1];
+      const float dy = ((s[3] - c[4] * s[3]) - c[5] * (s[2] - s[3])) + n;
+      s[2] = s[2] + dy;
+      s[3] = dy;
+      s[1] = s[0];
+      s[0] = x;
+      x = s[2];
     }
     return x;
   }
@@ -160,7 +167,7 @@ class ArmColumns {
 
   static constexpr float kG0 = 9.81f;   // cdam_core.models.greybox.effects.G0
   float prev_[kSignals] = {}, dprev_[kSignals] = {}, pprev_[kSignals] = {};
-  float z1_[kSignals][kSections][2] = {}, z2_[kSignals][kSections][2] = {};
+  float z1_[kSignals][kSections][4] = {}, z2_[kSignals][kSections][4] = {};
   float cols_[kChannels][kCols] = {};
   bool started_ = false;
 };

@@ -342,9 +342,10 @@ ARM_COLS = 8                                             # columns per channel, 
 def _arm_coupling(g):
     """The arm_coupling effects of an aerial_manipulator as the firmware's arrays (equation
     index per channel, -1 without; columns per channel; theta (5 x 8, zero-padded); the
-    Butterworth sections of the body and the joint bands (2, sections, 6)), or None. Only
+    Butterworth sections of the body and the joint bands (2, sections, 6: b0 b1 b2 1
+    alpha1 alpha2, causal.arm_sections)), or None. Only
     causal columns run on the board: the zero-phase ones need the rows after t."""
-    from cdam_core.models.greybox.causal import COLUMN_NAMES, arm_sos
+    from cdam_core.models.greybox.causal import COLUMN_NAMES, arm_sections
     arm = [(j, e) for j, e in enumerate(g.effects) if e.name == "arm_coupling"]
     if not arm:
         return None
@@ -365,8 +366,8 @@ def _arm_coupling(g):
         theta[ch, :len(names)] = [g.theta_[f"{e.key}.{n}"] for n in names]
     filt = g._filter(decl)
     r = float(decl.derivative_ratio)
-    sos = np.stack([arm_sos(filt.order, filt.cutoff_hz * r, g.dt),
-                    arm_sos(filt.order, decl.joint_filter(filt).cutoff_hz * r, g.dt)])
+    sos = np.stack([arm_sections(filt.order, filt.cutoff_hz * r, g.dt),
+                    arm_sections(filt.order, decl.joint_filter(filt).cutoff_hz * r, g.dt)])
     return eq_index, ncols, theta, sos
 
 

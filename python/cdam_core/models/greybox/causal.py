@@ -33,8 +33,10 @@ cosines of the angles) over dt^2, is w's jet's s / dt^2: every term of s is of t
 the result (increments squared, or s itself), so its float32 rounding is a few eps of the
 column's own terms instead of eps |w| / dt^2 (1e6 |w| at 1 kHz) for w[k] - 2 w[k-1] + w[k-2]
 computed from rounded w (see ``tests/models/test_arm_coupling_causal.py`` for the measured
-bound). The moment columns use the same jets (values at row k, rates, accelerations, and the
-difference of a product of a cosine and a rate, Delta(C R) = C.p R_k + C.v (R_k - R_{k-1}) with
+bound: 6.6e-6 of each column's RMS in float32 against 3.2e-3 for the plain second
+difference; the filters run in the output's increments, :func:`delta_sosfilt`, since scipy's
+direct form II transposed in float32 alone errs by 6.7e-5 at 8 Hz and 1 kHz). The moment
+columns use the same jets (values at row k, rates, accelerations, and the difference of a product of a cosine and a rate, Delta(C R) = C.p R_k + C.v (R_k - R_{k-1}) with
 R_k - R_{k-1} from the s parts).
 
 The board's firmware (fw/step_model.hpp, ``arm_coupling``) runs these formulas in float32 in
@@ -45,7 +47,8 @@ from __future__ import annotations
 import numpy as np
 from scipy import signal as sps
 
-__all__ = ["ARM_SIGNALS", "arm_sos", "increments", "jets", "arm_columns", "COLUMN_NAMES"]
+__all__ = ["ARM_SIGNALS", "arm_sections", "arm_sos", "delta_sosfilt", "increments", "jets",
+           "arm_columns", "COLUMN_NAMES"]
 
 # the measured signals, in the order the firmware keeps them (angles, positions, joints)
 ARM_SIGNALS = ("phi", "theta", "psi", "X", "Y", "Z", "q1", "q2")
@@ -56,16 +59,55 @@ COLUMN_NAMES = {"X": ("c0", "c1", "c2"), "Y": ("c0", "c1", "c2"), "Z": ("c0", "c
                 "tau_phi": ("c0", "c1", "c2", "dc1", "dc2", "p2")}
 
 
-def arm_sos(order: int, cutoff_hz: float, dt: float) -> np.ndarray:
-    """The Butterworth low-pass (second-order sections) of one band, its coefficients rounded
-    to float32: the filter the board holds is the one Python runs (at 8 Hz and 1 kHz the poles
-    lie within 0.05 of 1, and float32-rounded coefficients alone move the gain by ~1e-4)."""
+def arm_sections(order: int, cutoff_hz: float, dt: float) -> np.ndarray:
+    """The Butterworth low-pass of one band as the board holds it: per second-order section
+    (b0, b1, b2, 1, alpha1, alpha2), float32 numbers, with alpha1 = a1 + 2 and alpha2 = 1 + a1
+    + a2 (the denominator's distance from a double integrator: small numbers kept to float32's
+    relative precision, where a1 near -2 and a2 near 1 would lose theirs; at 8 Hz and 1 kHz
+    the poles lie within 0.05 of 1)."""
     fs = 1.0 / float(dt)
     if not 0 < cutoff_hz < 0.5 * fs:
         raise ValueError(f"cutoff_hz: {cutoff_hz:g} Hz is not below the Nyquist frequency "
                          f"{0.5 * fs:g} Hz")
     sos = sps.butter(int(order), float(cutoff_hz), fs=fs, output="sos")
-    return sos.astype(np.float32).astype(np.float64)
+    out = sos.copy()
+    out[:, 4] = sos[:, 4] + 2.0
+    out[:, 5] = (1.0 + sos[:, 4]) + sos[:, 5]
+    return out.astype(np.float32).astype(np.float64)
+
+
+def arm_sos(order: int, cutoff_hz: float, dt: float) -> np.ndarray:
+    """The second-order sections (scipy's layout) of exactly the filter :func:`arm_sections`
+    defines (a1 = alpha1 - 2, a2 = alpha2 - alpha1 + 1, exact in float64)."""
+    sec = arm_sections(order, cutoff_hz, dt)
+    sos = sec.copy()
+    sos[:, 4] = sec[:, 4] - 2.0
+    sos[:, 5] = (sec[:, 5] - sec[:, 4]) + 1.0
+    return sos
+
+
+def delta_sosfilt(sections: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """The board's filter, in the input's precision (float32: the rounding tests), started
+    at rest: per section N = (b0 x + b1 x1) + b2 x2, dy = ((dy1 - alpha1 dy1) - alpha2 y2) + N,
+    y = y1 + dy, with y2 = y1 - dy1 (the same recursion as :func:`arm_sos`'s sections,
+    y = -a1 y1 - a2 y2 + N, written in the output's increments)."""
+    x = np.asarray(x)
+    f = x.dtype.type
+    c = sections.astype(x.dtype)
+    y = x.copy()
+    for q in range(c.shape[0]):
+        b0, b1, b2, _, al1, al2 = c[q]
+        out = np.empty_like(y)
+        x1 = x2 = y1 = dy1 = f(0)
+        for k, v in enumerate(y):
+            n = (b0 * v + b1 * x1) + b2 * x2
+            dy = ((dy1 - al1 * dy1) - al2 * (y1 - dy1)) + n
+            y1 = y1 + dy
+            dy1 = dy
+            x2, x1 = x1, v
+            out[k] = y1
+        y = out
+    return y
 
 
 def increments(a, wrap: bool = False) -> tuple[np.ndarray, np.ndarray]:
@@ -126,26 +168,34 @@ def _sincos(a: _Jet) -> tuple[_Jet, _Jet]:
     return sin, cos
 
 
-def jets(raw: dict, dt: float, body_sos: np.ndarray, joint_sos: np.ndarray) -> dict:
+def jets(raw: dict, dt: float, body: np.ndarray, joint: np.ndarray) -> dict:
     """``{signal: jet}`` over a record: ``raw`` maps every name of ARM_SIGNALS to its measured
-    samples (psi may be wrapped or unwrapped)."""
+    samples (psi may be wrapped or unwrapped); ``body``, ``joint``: the bands'
+    :func:`arm_sections`. float64 runs them through scipy's sosfilt (:func:`arm_sos`), float32
+    the board's increment form (:func:`delta_sosfilt`)."""
     out = {}
     for name in ARM_SIGNALS:
         a = _floats(raw[name])
         d, d2 = increments(a, wrap=(name == "psi"))
-        sos = body_sos if name in BODY else joint_sos
-        p = sps.sosfilt(sos, d).astype(a.dtype, copy=False)
-        s = sps.sosfilt(sos, d2).astype(a.dtype, copy=False)
+        sec = body if name in BODY else joint
+        if a.dtype == np.float32:
+            p, s = delta_sosfilt(sec, d), delta_sosfilt(sec, d2)
+        else:
+            sos = sec.copy()
+            sos[:, 4] = sec[:, 4] - 2.0
+            sos[:, 5] = (sec[:, 5] - sec[:, 4]) + 1.0
+            p, s = sps.sosfilt(sos, d), sps.sosfilt(sos, d2)
         c = np.concatenate([np.zeros(1, a.dtype), p[:-1]])
         v = np.concatenate([a[:1], a[:-1]])
         out[name] = _Jet(v, p, c, s)
     return out
 
 
-def arm_columns(raw: dict, dt: float, body_sos, joint_sos, channels, g0: float) -> dict:
+def arm_columns(raw: dict, dt: float, body, joint, channels, g0: float) -> dict:
     """``{channel: {column name: samples}}`` (names of :data:`COLUMN_NAMES`) for each of
-    ``channels``, from the measured signals ``raw`` (module doc)."""
-    J = jets(raw, dt, body_sos, joint_sos)
+    ``channels``, from the measured signals ``raw`` (module doc); ``body``, ``joint``: the
+    bands' :func:`arm_sections`."""
+    J = jets(raw, dt, body, joint)
     sf, cf = _sincos(J["phi"])
     st, ct = _sincos(J["theta"])
     sp, cp = _sincos(J["psi"])

@@ -454,13 +454,13 @@ class ArmCoupling(Effect):
     def causal_columns(self, s) -> dict:
         """The causal columns (:mod:`.causal`) from the prepared record's measured signals,
         at the bands of its derivative filters (body and joints)."""
-        from cdam_core.models.greybox.causal import arm_columns, arm_sos
+        from cdam_core.models.greybox.causal import arm_columns, arm_sections
         from cdam_core.models.greybox.flight import AerialManipulator
         dt = float(s["dt"])
         body, joint = arm_bands(s, AerialManipulator)
         raw = {n: s[n + "_raw"] for n in ("phi", "theta", "psi", "X", "Y", "Z", "q1", "q2")}
-        cols = arm_columns(raw, dt, arm_sos(body[0], body[1], dt), arm_sos(joint[0], joint[1], dt),
-                           (self.channel,), G0)[self.channel]
+        cols = arm_columns(raw, dt, arm_sections(body[0], body[1], dt),
+                           arm_sections(joint[0], joint[1], dt), (self.channel,), G0)[self.channel]
         return {_p(self, n): c for n, c in cols.items()}
 
 
