@@ -4,8 +4,9 @@ benchmark: `python benchmarks/arm_coupling_causal.py`.
 (Answered since: the board runs the causal form of cdam_core.models.greybox.causal, filtered
 increments as jets, and a model meant for it is refitted on those columns, `cdam residual
 --save FILE --firmware`; the comparison below is of the plain forward filter and backward
-differences, which that form equals in exact arithmetic, and of the zero-phase fit's
-parameters on them, i.e. why the refit is needed.)
+differences, a close relative of that form (which takes the sines and cosines at the measured
+angle and the filtered increments around it), with the zero-phase fit's parameters: why the
+refit is needed.)
 
 The columns (cdam_core.models.greybox.effects.ArmCoupling.columns) are built from the prepared
 signals: a zero-phase Butterworth low-pass (scipy's sosfiltfilt: a forward and a backward pass
