@@ -5,39 +5,25 @@ through fw::StepModel::observe, in every mode) against the Python model on the s
 float32-rounded record, with the residual monitor beside it. Zero-phase columns are refused
 (test_firmware_kinds_export.py)."""
 import re
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from cdam_core import firmware as fw
-from cdam_core.models.file import save_model
-from cdam_core.models.greybox import effects as eff
-from cdam_core.models.greybox.augmented import GreyBox
-from cdam_core.models.greybox.registry import get_model
-from cdam_core.sim import simulate_flight
-from cdam_core.sim.parameters import plant_dict, plant_vector, total_mass
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _kinds import arm_coupling_file  # noqa: E402
 
 needs_toolchain = pytest.mark.skipif(fw.toolchain_available() is not None,
                                      reason=f"firmware toolchain: {fw.toolchain_available()}")
-CHANNELS = ("X", "Y", "Z", "tau_phi", "tau_theta")
 ROWS = 1500     # 1.5 s of the 1 kHz flight on the board (the QEMU runs take a few seconds)
 
 
 @pytest.fixture(scope="module")
 def arm(tmp_path_factory):
-    ds = simulate_flight("both", duration=10.0, seed=3, declare=["arm_coupling"])
-    m = get_model("aerial_manipulator")
-    U = np.column_stack([ds.column(k) for k in m.inputs])
-    Y = np.column_stack([ds.column(k) for k in m.positions])
-    dt = float(np.median(np.diff(ds.t)))
-    fixed = {"m": total_mass(plant_dict(plant_vector()), with_payload=False)}
-    g = GreyBox("aerial_manipulator", dt, fixed=fixed,
-                effects=[eff.ArmCoupling(c, causal=True) for c in CHANNELS]).fit(U, Y)
-    from cdam_core.evaluate.monitor import calibrate
-    path = tmp_path_factory.mktemp("arm") / "arm.json"
-    save_model(path, g, inputs=list(m.inputs), outputs=list(m.positions),
-               monitor=calibrate(g, U[:4000], Y[:4000], dt, paths=100, seed=0))
-    return path, U, Y
+    return arm_coupling_file(tmp_path_factory.mktemp("arm") / "arm.json", monitor=True)
 
 
 def test_header_holds_the_causal_columns_numbers(arm, tmp_path):
