@@ -42,9 +42,10 @@ Settings (:func:`calibrate`), none tuned to a record:
   linear map of the last input increments (the missing lag's error, driven by the
   manoeuvres), and the part below ~1.6 Hz that the EWMA and the CUSUM accumulate differs from
   flight to flight (EWMA std 0.9-1.3 x the training flight's): 5 of 6 clean 60 s flights
-  alarm. Thresholds from AR models of the training record's segments (4 of 6) or a residual
-  corrected by the input increments (5 of 6) do not change that: the training flight does not
-  show how aggressive the next one will be. The lag itself, chosen from the training flight
+  alarm. Thresholds from AR models of the training record's segments (4 of 6), a residual
+  corrected by the input increments (5 of 6) or thresholds the largest over four training
+  flights (3 of 6) do not change that: the training flights do not show how aggressive the
+  next one will be. The lag itself, chosen from the training flight
   (held-out one-step error), removes it (0 of 6; delays of three effects 0.02-0.06 s): the
   remedy is the model, not the monitor.
   Simulation, not Siegmund's approximation: the one-step residual of a 1 kHz record is
