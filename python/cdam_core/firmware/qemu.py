@@ -111,7 +111,9 @@ def run_step_equivalence(build_dir, model, U, Y, mode: str = "one_step", *,
 
     Returns max_abs_error (over rows t0.. and outputs), output_span (the largest max - min of
     an output of Y), max_rel_error (the largest of each output's error over its span),
-    instructions_per_step (mean) and instructions_per_step_max, stack_bytes, steps, sandbox
+    instructions_per_step (mean, the measured row's observe included), instructions_per_observe
+    (mean; 0 for the kinds that ignore the measured row) and instructions_per_step_max (the step
+    alone), stack_bytes, steps, sandbox
     and the firmware's predictions ``outputs`` (N - t0, m) float32.
     """
     fm = model if isinstance(model, StepFirmwareModel) else load_firmware_model(model)
