@@ -1,6 +1,13 @@
 """Could the board compute the `arm_coupling` columns sample by sample? A measurement, not a
 benchmark: `python benchmarks/arm_coupling_causal.py`.
 
+(Answered since: the board runs the causal form of cdam_core.models.greybox.causal, filtered
+increments as jets, and a model meant for it is refitted on those columns, `cdam residual
+--save FILE --firmware`; the comparison below is of the plain forward filter and backward
+differences, a close relative of that form (which takes the sines and cosines at the measured
+angle and the filtered increments around it), with the zero-phase fit's parameters: why the
+refit is needed.)
+
 The columns (cdam_core.models.greybox.effects.ArmCoupling.columns) are built from the prepared
 signals: a zero-phase Butterworth low-pass (scipy's sosfiltfilt: a forward and a backward pass
 over the whole record) and central differences (numpy.gradient: row t + 1 is needed), twice

@@ -83,6 +83,7 @@ def _models(tmp: Path, network: dict) -> dict:
             "greybox_flexible_6_effects": k.flexible_file(tmp / "flex.json"),
             "greybox_quadrotor_4_effects": k.quadrotor_file(tmp / "quad.json"),
             "greybox_aerial_manipulator_6_effects": k.aerial_file(tmp / "aerial.json"),
+            "greybox_aerial_manipulator_arm_coupling": k.arm_coupling_file(tmp / "arm.json")[0],
             "quad_physics_lag_damping_reaction": k.quad_physics_file(tmp / "quad_physics.json")[0],
             "quad_hybrid_4_units_3_lags": k.quad_hybrid_file(tmp / "quad_hybrid.json")[0],
             **_nanodrone_model(tmp)}

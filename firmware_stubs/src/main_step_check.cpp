@@ -5,7 +5,9 @@
 // mode, then replaced by the measured row (correct). k-step: row t is predicted by k steps
 // from a copy of a model that has taken the measured rows up to t - k (one-step below, k rows
 // behind), rows t-k+1 .. t from a ring of the last kMaxK rows; rows kT0 .. kT0+k-2 are
-// returned as measured (as cdam_core.models.protocol does). The predictions go to
+// returned as measured (as cdam_core.models.protocol does). In every mode each measured row
+// then reaches the model (fw::StepModel::observe: the measured-row input of the kinds whose
+// equations read measured signals, greybox arm_coupling). The predictions go to
 // ./fw_step_out.bin (float32, kY per row).
 // Instructions: SysTick (core clock = virtual time under -icount) read around every step; the
 // host turns ticks into instructions with the calibration loop. With a monitor section
@@ -54,6 +56,19 @@ void timed_step(fw::StepModel& model, const float* u, float* y, std::uint64_t& t
   total += d;
   if (d > largest) largest = d;
   ++count;
+}
+
+// the measured row into the model (observe), SysTick read around it: summed apart from the
+// step's ticks (the host adds the two per row)
+std::uint64_t g_observe_ticks = 0;
+std::uint32_t g_observed = 0;
+void timed_observe(fw::StepModel& model, const float* ym) {
+  const std::uint32_t t0 = fw::hal::systick_value();
+  __asm__ volatile("" ::: "memory");
+  model.observe(ym);
+  __asm__ volatile("" ::: "memory");
+  g_observe_ticks += elapsed(t0, fw::hal::systick_value());
+  ++g_observed;
 }
 
 }  // namespace
@@ -119,13 +134,17 @@ int main() {
         continue;
       }
       g_scratch = g_model;               // has taken the measured rows up to t - k
-      for (std::int32_t j = t - k_ahead + 1; j < t; ++j) g_scratch.step(g_rows[j % kMaxK], y);
+      for (std::int32_t j = t - k_ahead + 1; j < t; ++j) {
+        g_scratch.step(g_rows[j % kMaxK], y);
+        g_scratch.observe(g_rows[j % kMaxK] + fw::kU);   // the measured row (every mode)
+      }
       timed_step(g_scratch, u, y, total_ticks, max_ticks, timed);
       if (sh::write(out, y, sizeof y) != sizeof y) return 3;
       const float* r = g_rows[(t - k_ahead + 1) % kMaxK];   // one row on, measured
       float skip[fw::kY];
       g_model.step(r, skip);
       g_model.correct(r + fw::kU);
+      g_model.observe(r + fw::kU);
       continue;
     }
     timed_step(g_model, u, y, total_ticks, max_ticks, timed);
@@ -155,6 +174,7 @@ int main() {
     }
 #endif
     if (head[1] == 0) g_model.correct(ym);
+    timed_observe(g_model, ym);   // the measured row reaches the model in every mode
     if (sh::write(out, y, sizeof y) != sizeof y) return 3;
   }
   sh::close(in);
@@ -167,6 +187,9 @@ int main() {
   sh::kv("monitor_ticks_hi", static_cast<std::uint32_t>(monitor_ticks >> 32));
   sh::kv("monitor_ticks_lo", static_cast<std::uint32_t>(monitor_ticks));
 #endif
+  sh::kv("observed", g_observed);
+  sh::kv("observe_ticks_hi", static_cast<std::uint32_t>(g_observe_ticks >> 32));
+  sh::kv("observe_ticks_lo", static_cast<std::uint32_t>(g_observe_ticks));
   sh::kv("steps", steps);
   sh::kv("timed", timed);
   sh::kv("step_ticks_hi", static_cast<std::uint32_t>(total_ticks >> 32));

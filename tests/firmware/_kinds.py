@@ -276,6 +276,33 @@ def aerial_file(path, effects=True, dt=0.001):
     return path
 
 
+ARM_CHANNELS = ("X", "Y", "Z", "tau_phi", "tau_theta")
+
+
+def arm_coupling_file(path, monitor=False):
+    """The aerial manipulator with arm_coupling on its five channels in the causal form the
+    board runs, fitted on a simulated 10 s flight ('both', seed 3, 1 kHz; the simulator's arm
+    is always coupled); with ``monitor``, its monitor section calibrated on the first 4 s.
+    Returns (path, U, Y) of the flight."""
+    from cdam_core.evaluate.monitor import calibrate
+    from cdam_core.models.greybox.effects import ArmCoupling
+    from cdam_core.models.greybox.registry import get_model
+    from cdam_core.sim import simulate_flight
+    from cdam_core.sim.parameters import plant_dict, plant_vector, total_mass
+    ds = simulate_flight("both", duration=10.0, seed=3, declare=["arm_coupling"])
+    m = get_model("aerial_manipulator")
+    U = np.column_stack([ds.column(k) for k in m.inputs])
+    Y = np.column_stack([ds.column(k) for k in m.positions])
+    dt = float(np.median(np.diff(ds.t)))
+    g = GreyBox("aerial_manipulator", dt,
+                fixed={"m": total_mass(plant_dict(plant_vector()), with_payload=False)},
+                effects=[ArmCoupling(c, causal=True) for c in ARM_CHANNELS]).fit(U, Y)
+    save_model(path, g, inputs=list(m.inputs), outputs=list(m.positions),
+               monitor=calibrate(g, U[:4000], Y[:4000], dt, paths=100, seed=0)
+               if monitor else None)
+    return path, U, Y
+
+
 QUAD_LAG = 0.03     # s, the generator's rotor lag and the quad_physics model's stated one
 QUAD_N_FIT = 400    # rows of the 6 s flight the quad_physics model is fitted on
 

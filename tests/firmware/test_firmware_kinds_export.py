@@ -209,7 +209,9 @@ def test_unsupported_greybox_effect_is_named(tmp_path):
                                      [None] * 3 if k == "std" else extra)
                        for k, v in d["parameters"].items()}
     save_model(tmp_path / "am.json", GreyBox.from_dict(d))
-    with pytest.raises(ValueError, match="effect 'arm_coupling' cannot run on the firmware"):
+    # zero-phase columns (the file's default): refused, the remedy named
+    with pytest.raises(ValueError, match="effect 'arm_coupling' cannot run on the firmware "
+                                         r"with zero-phase columns.*--firmware"):
         fw.load_firmware_model(tmp_path / "am.json")
     assert main(["export-firmware", str(tmp_path / "am.json"), "-o",
                  str(tmp_path / "m.hpp")]) == 2

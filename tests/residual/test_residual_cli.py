@@ -113,6 +113,36 @@ def test_cli_on_a_simulated_flight(tmp_path):
     assert set(js["declared_error"]) >= {"X", "Z", "tau_theta", "tau_m1", "tau_l2"}
 
 
+def test_cli_firmware_refit_on_causal_columns(tmp_path, capsys):
+    """--save --firmware: the saved arm_coupling effects are causal (computable row by row),
+    the model is refitted on them (the hidden thrust loss keeps its value), and the firmware
+    exporter takes the file, which it refuses with the zero-phase columns."""
+    from cdam_core import firmware as fw
+    from cdam_core.sim import simulate_flight, write_flight
+    ds = simulate_flight("both", duration=6.0, seed=3, effects=["thrust_loss:c=0.005"],
+                         declare=["arm_coupling"])
+    write_flight(tmp_path / "f.csv", ds)
+    base = ["residual", str(tmp_path / "f.csv"), "--model", "aerial_manipulator", "--fixed",
+            "m=1.82", "--no-free-run", "--estimator", "idim-ls"]
+    assert main(base + ["--firmware"]) == 2
+    assert "--firmware: needs --save" in capsys.readouterr().err
+    assert main(base + ["--json", str(tmp_path / "o.json"), "--save", str(tmp_path / "m.json"),
+                        "--firmware"]) == 0
+    from cdam_core.models import load_model
+    m = load_model(tmp_path / "m.json")
+    arm = [e for e in m.effects if e.name == "arm_coupling"]
+    assert len(arm) == 5 and all(e.causal for e in arm)
+    assert m.theta_["thrust_loss@Z.c"] == pytest.approx(0.005, rel=0.2)
+    saved = json.loads((tmp_path / "o.json").read_text())["saved_model"]
+    assert saved["firmware_refit"] is True
+    # refitted alike, causal and zero-phase columns predict one step ahead alike (1 % per
+    # output; the monitor watches this error)
+    np.testing.assert_allclose(saved["one_step_rms_causal"], saved["one_step_rms_zero_phase"],
+                               rtol=1e-2)
+    fw.export_header(tmp_path / "m.json", tmp_path / "m.hpp")
+    assert "#define CDAM_MODEL_ARM 1" in (tmp_path / "m.hpp").read_text()
+
+
 def test_cli_test_record_under_the_simulation_protocol(tmp_path):
     """--test: the declared and final models simulated on another record from its first
     --n-init outputs; --simulated writes them beside the measured output."""

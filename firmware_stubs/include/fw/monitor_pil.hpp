@@ -97,6 +97,7 @@ class MonitorLoop {
         }
       }
       model_.correct(y);
+      model_.observe(y);   // the measured row (arm_coupling's columns)
     }
     status_ = status;
     pending_ = static_cast<std::uint8_t>(pending_ + n);

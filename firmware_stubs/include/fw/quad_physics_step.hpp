@@ -74,6 +74,10 @@ class StepModel {
     ring_.push(u);
   }
 
+  // the measured row y(t), after step (every mode): a kind whose equations need measured
+  // signals (greybox arm_coupling) takes them here; the others ignore it
+  void observe(const float* y) { (void)y; }
+
   void correct(const float* y) {
     for (int i = 0; i < kS; ++i) x_[i] = y[i];
   }

@@ -30,6 +30,12 @@
 #endif
 #if CDAM_MODEL_KIND == 3
 #include <cmath>
+#ifndef CDAM_MODEL_ARM
+#define CDAM_MODEL_ARM 0
+#endif
+#if CDAM_MODEL_ARM
+#include "fw/arm_columns.hpp"
+#endif
 #endif
 
 namespace fw {
@@ -85,6 +91,10 @@ class StepModel {
     }
     push_output(y);
   }
+
+  // the measured row y(t), after step (every mode): a kind whose equations need measured
+  // signals (greybox arm_coupling) takes them here; the others ignore it
+  void observe(const float* y) { (void)y; }
 
   void correct(const float* y) {
     if (kNa > 0)
@@ -179,6 +189,7 @@ class StepModel {
   void prime(const float* u, const float* y) {
     push_input(u);
     measured(y);
+    observe(y);
   }
 
   void step(const float* u, float* y) {
@@ -202,6 +213,16 @@ class StepModel {
       y[i] = x_[i];
     }
     push_input(u);
+  }
+
+  // the measured row y(t), after step (every mode; prime takes it itself): the arm_coupling
+  // columns of row t (fw::ArmColumns) for the step to row t + 1
+  void observe(const float* y) {
+#if CDAM_MODEL_ARM
+    arm_.observe(y);
+#else
+    (void)y;
+#endif
   }
 
   void correct(const float* y) {
@@ -399,6 +420,15 @@ class StepModel {
           break;
       }
     }
+#if CDAM_MODEL_ARM
+    // arm_coupling: the measured row's columns (fw/arm_columns.hpp), per channel theta . col
+    for (int ch = 0; ch < ArmColumns::kChannels; ++ch) {
+      const int q = cdam_model::kArmEq[ch];
+      if (q < 0) continue;
+      for (int n = 0; n < cdam_model::kArmCols[ch]; ++n)
+        e[q] = e[q] - cdam_model::kArmTheta[ch * ArmColumns::kCols + n] * arm_.at(ch, n);
+    }
+#endif
   }
 
 #if CDAM_MODEL_DECLARED == 2 || CDAM_MODEL_DECLARED == 3
@@ -475,12 +505,20 @@ class StepModel {
   float u_[kRing][kU] = {};
   int head_ = 0;
   int rows_ = 0;
+#if CDAM_MODEL_ARM
+  ArmColumns arm_;
+#endif
 };
 
 inline std::uint32_t params_fnv1a() {
   std::uint32_t h = fnv1a_floats(0x811C9DC5u, cdam_model::kBase, sizeof(cdam_model::kBase) / 4);
   h = fnv1a_floats(h, cdam_model::kInertia, sizeof(cdam_model::kInertia) / 4);
-  return fnv1a_floats(h, cdam_model::kEffectParam, sizeof(cdam_model::kEffectParam) / 4);
+  h = fnv1a_floats(h, cdam_model::kEffectParam, sizeof(cdam_model::kEffectParam) / 4);
+#if CDAM_MODEL_ARM
+  h = fnv1a_floats(h, cdam_model::kArmTheta, sizeof(cdam_model::kArmTheta) / 4);
+  h = fnv1a_floats(h, cdam_model::kArmSos, sizeof(cdam_model::kArmSos) / 4);
+#endif
+  return h;
 }
 
 #elif CDAM_MODEL_KIND == 5
@@ -521,6 +559,10 @@ class StepModel {
     for (int k = 0; k < kY; ++k) y[k] = cdam::minmax_inverse(yn[k], kNetYMin[k], kNetYMax[k]);
     push_output(y);
   }
+
+  // the measured row y(t), after step (every mode): a kind whose equations need measured
+  // signals (greybox arm_coupling) takes them here; the others ignore it
+  void observe(const float* y) { (void)y; }
 
   void correct(const float* y) {
     if (kNa > 0)

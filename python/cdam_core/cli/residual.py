@@ -54,6 +54,8 @@ def run(args) -> int:
              folders=[("--report", args.report)])
     if args.simulated and not args.test:
         raise CliError("--simulated: needs --test (the record simulated)")
+    if args.firmware and not args.save:
+        raise CliError("--firmware: needs --save (the model refitted for the board)")
     if args.simulated and not str(args.simulated).lower().endswith(".csv"):
         raise CliError(f"--simulated: expected a .csv file name, got {args.simulated!r}")
     if args.n_init < 1:
@@ -182,11 +184,46 @@ def _save(path, sel, mapping: dict, ds, args) -> dict:
     m = final.model
     g = greybox_of(final, float(np.mean(np.diff(ds.t))))
     extra = list(g.extra_columns)
-    digest = save_model(path, g, inputs=[mapping[i] for i in m.inputs] + extra,
-                        outputs=[mapping[p] for p in m.positions],
+    inputs = [mapping[i] for i in m.inputs] + extra
+    outputs = [mapping[p] for p in m.positions]
+    out = {}
+    if args.firmware:
+        g, out = _firmware_refit(g, ds, inputs, outputs)
+    digest = save_model(path, g, inputs=inputs, outputs=outputs,
                         meta={"source": Path(args.data).name, "command": "cdam residual",
-                              "effects": [e.key for e in final.effects]})
-    return {"path": str(path), "kind": "greybox", "sha256": digest}
+                              "effects": [e.key for e in final.effects],
+                              **({"firmware": True} if args.firmware else {})})
+    return {"path": str(path), "kind": "greybox", "sha256": digest, **out}
+
+
+def _firmware_refit(g, ds, inputs, outputs):
+    """``--firmware``: effects whose columns need rows after t (arm_coupling's zero-phase
+    columns) are replaced by their causal form and the model is refitted on the record
+    (GreyBox's IDIM fit with the same filter and effects): the board computes those columns row
+    by row, so its parameters must be fitted on them. Returns the model and a summary (the
+    one-step RMS error per output on the record: the residual loop's model, the same effects
+    refitted with zero-phase columns and with causal ones, like with like)."""
+    import dataclasses
+    import numpy as np
+    from cdam_core.models.greybox.augmented import GreyBox
+    causal = [dataclasses.replace(e, causal=True) if e.name == "arm_coupling" else e
+              for e in g.effects]
+    if causal == list(g.effects):
+        return g, {"firmware_refit": False}
+    U = np.column_stack([ds.column(c) for c in inputs])
+    Y = np.column_stack([ds.column(c) for c in outputs])
+    def refit(effects):
+        return GreyBox(g.declared, g.dt, effects, g.fixed, g.cutoff_hz, g.filter_order,
+                       g.extra_columns).fit(U, Y)
+
+    def rms(model):
+        P = model.predict(U, Y, mode="one_step")
+        return np.sqrt(np.mean((P[2:] - Y[2:]) ** 2, axis=0)).tolist()
+
+    h = refit(causal)
+    return h, {"firmware_refit": True, "one_step_rms_residual_model": rms(g),
+               "one_step_rms_zero_phase": rms(refit(list(g.effects))),
+               "one_step_rms_causal": rms(h)}
 
 
 def _summary(js: dict) -> list[str]:
@@ -252,6 +289,10 @@ def register(subparsers) -> None:
     p.add_argument("--simulated", help="write the test record's simulated outputs (CSV)")
     p.add_argument("--save", help="write the final model (declared model + the effects found) "
                                   "as a greybox model file here (docs/MODEL_FILE.md)")
+    p.add_argument("--firmware", action="store_true",
+                   help="with --save: refit the saved model for the board (cdam "
+                        "export-firmware): arm_coupling's columns in their causal form, "
+                        "computable row by row, and the model refitted on them")
     p.add_argument("--report", help="write a Markdown report with PNG figures into this folder")
     p.add_argument("--estimator", choices=("auto", "idim-ls", "idim-iv", "oe"), default="auto",
                    help="how the final model's parameters are estimated (rigid_axis, "

@@ -35,6 +35,19 @@ Settings (:func:`calibrate`), none tuned to a record:
     (not the model's error): a heavy-tailed, heteroscedastic channel no stationary threshold
     fits. That component is not watched (``watched`` 0: its thresholds are set as for any
     output, but it never alarms); the three others carry the attitude's residual to first order.
+  A model that lacks part of the machine's dynamics is not watched by a stationary monitor.
+  Measured on the independent quad generator with a 30 ms rotor lag the model lacks
+  (benchmarks/monitor_missing_lag.py): the normalised residual's variance is the same on
+  every flight (z std 0.97-1.04), but 53-67 % of the vertical-velocity and rate residual is a
+  linear map of the last input increments (the missing lag's error, driven by the
+  manoeuvres), and the part below ~1.6 Hz that the EWMA and the CUSUM accumulate differs from
+  flight to flight (EWMA std 0.9-1.3 x the training flight's): 5 of 6 clean 60 s flights
+  alarm. Thresholds from AR models of the training record's segments (4 of 6), a residual
+  corrected by the input increments (5 of 6) or thresholds the largest over four training
+  flights (3 of 6) do not change that: the training flights do not show how aggressive the
+  next one will be. The lag itself, chosen from the training flight
+  (held-out one-step error), removes it (0 of 6; delays of three effects 0.02-0.06 s): the
+  remedy is the model, not the monitor.
   Simulation, not Siegmund's approximation: the one-step residual of a 1 kHz record is
   strongly autocorrelated (a smoothed record, a model error that varies slowly), and
   Siegmund's formula assumes independent samples; with an AR(1) coefficient of 0.9 it would

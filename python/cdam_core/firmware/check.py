@@ -157,6 +157,8 @@ def _step_report(fm: StepFirmwareModel, sizes: dict, runs: dict, heap_free: bool
         "static_ram_bytes": img["data"] + img["bss"],
         "heap_free": bool(heap_free),
         "instructions_per_step": ips,
+        "instructions_per_observe": max(one.get("instructions_per_observe", 0.0),
+                                        free.get("instructions_per_observe", 0.0)),
         "instructions_per_step_max": max(one["instructions_per_step_max"],
                                          free["instructions_per_step_max"]),
         "microseconds_168mhz": round(ips / (CLOCK_HZ / 1e6), 2),

@@ -111,7 +111,9 @@ def run_step_equivalence(build_dir, model, U, Y, mode: str = "one_step", *,
 
     Returns max_abs_error (over rows t0.. and outputs), output_span (the largest max - min of
     an output of Y), max_rel_error (the largest of each output's error over its span),
-    instructions_per_step (mean) and instructions_per_step_max, stack_bytes, steps, sandbox
+    instructions_per_step (mean, the measured row's observe included), instructions_per_observe
+    (mean; 0 for the kinds that ignore the measured row) and instructions_per_step_max (the step
+    alone), stack_bytes, steps, sandbox
     and the firmware's predictions ``outputs`` (N - t0, m) float32.
     """
     fm = model if isinstance(model, StepFirmwareModel) else load_firmware_model(model)
@@ -150,6 +152,11 @@ def run_step_equivalence(build_dir, model, U, Y, mode: str = "one_step", *,
     tpi = int(kv["cal_ticks"]) / int(kv["cal_instructions"])
     total = (int(kv["step_ticks_hi"]) << 32) + int(kv["step_ticks_lo"])
     empty = int(kv["empty_ticks"])
+    # the measured row into the model after every row (fw::StepModel::observe; arm_coupling's
+    # columns, nothing in the other kinds): its instructions count as the step's
+    observed = int(kv.get("observed", 0))
+    obs = ((int(kv["observe_ticks_hi"]) << 32) + int(kv["observe_ticks_lo"]) - empty * observed) \
+        / max(observed, 1) / tpi if observed else 0.0
     err = np.max(np.abs(P.astype(np.float64) - want), axis=0)
     span = np.ptp(Y32.astype(np.float64), axis=0)
     extra = _monitor_report(fm, kv, Y32[fm.history:], want, flags, frames, tpi, steps) \
@@ -161,7 +168,8 @@ def run_step_equivalence(build_dir, model, U, Y, mode: str = "one_step", *,
         "output_span": float(np.max(span)),
         "max_rel_error": float(np.max(np.where(span > 0, err / np.where(span > 0, span, 1),
                                                np.where(err > 0, np.inf, 0.0)))),
-        "instructions_per_step": round((total - empty * timed) / max(timed, 1) / tpi, 1),
+        "instructions_per_step": round((total - empty * timed) / max(timed, 1) / tpi + obs, 1),
+        "instructions_per_observe": round(obs, 1),
         "instructions_per_step_max": round((int(kv["step_ticks_max"]) - empty) / tpi, 1),
         "stack_bytes": int(kv["stack_bytes"]),
         "sandbox": kv["sandbox"],

@@ -100,8 +100,10 @@ class StepFirmwareModel:
                     f"{'dynamic' if i['kPriorDynamic'] else 'hold'} + {i['kNetInputs']}-"
                     f"{i['kNetHidden']}-3 tanh network on the rates ({i['kLags']} rotor lags), "
                     f"delays {i['kDelayTrans']}/{i['kDelayRot']} samples, one RK4 step per sample")
-        return (f"greybox, {self.model.declared}, {i['kEffects']} effect(s), "
-                f"{i['kSubsteps']} substep(s) per sample")
+        arm = sum(int(q >= 0) for q in self.int_arrays.get("kArmEq", ()))
+        return (f"greybox, {self.model.declared}, {i['kEffects']} effect(s)"
+                + (f" + causal arm coupling on {arm} channel(s)" if arm else "")
+                + f", {i['kSubsteps']} substep(s) per sample")
 
     def header(self) -> list[str]:
         """The header's lines after the common preamble (namespace cdam_model, numbers only)."""
@@ -250,7 +252,10 @@ def _greybox(mf) -> StepFirmwareModel:
     delayed = set()
     equations = _equation_order(g)
     cables = list(getattr(decl, "cables", {}))     # aerial_manipulator: tau_l1, tau_l2
+    arm = _arm_coupling(g)
     for j, e in enumerate(g.effects):
+        if e.name == "arm_coupling":
+            continue                          # its own arrays (_arm_coupling)
         if e.name not in EFFECT_CODES:
             raise ValueError(f"MODEL: model.effects[{j}]: effect {e.name!r} cannot run on the "
                              f"firmware yet (it runs {', '.join(EFFECT_CODES)})")
@@ -316,10 +321,54 @@ def _greybox(mf) -> StepFirmwareModel:
     fm.arrays = {"kBase": base, "kInertia": inertia,
                  # one row of four values per effect (a zero row when there is none)
                  "kEffectParam": np.asarray(params, np.float64).ravel() if E else np.zeros(4)}
+    fm.macros["CDAM_MODEL_ARM"] = int(arm is not None)
+    if arm is not None:
+        eq_index, ncols, theta, sos = arm
+        fm.ints["kArmSections"] = int(sos.shape[1])
+        fm.arrays.update({"kArmTheta": theta, "kArmSos": sos})
+        fm.hashed = fm.hashed + ("kArmTheta", "kArmSos")
     fm.int_arrays = {"kEffectCode": codes or [0], "kEffectEq": eqs or [0],
                      "kEffectVel": vels or [0], "kEffectIndex": index or [0],
                      "kEffectLag": lag or [0]}
+    if arm is not None:
+        fm.int_arrays.update({"kArmEq": arm[0], "kArmCols": arm[1]})
     return fm
+
+
+ARM_CHANNELS = ("X", "Y", "Z", "tau_theta", "tau_phi")   # fw/arm_columns.hpp's order
+ARM_COLS = 8                                             # columns per channel, at most
+
+
+def _arm_coupling(g):
+    """The arm_coupling effects of an aerial_manipulator as the firmware's arrays (equation
+    index per channel, -1 without; columns per channel; theta (5 x 8, zero-padded); the
+    Butterworth sections of the body and the joint bands (2, sections, 6: b0 b1 b2 1
+    alpha1 alpha2, causal.arm_sections)), or None. Only
+    causal columns run on the board: the zero-phase ones need the rows after t."""
+    from cdam_core.models.greybox.causal import COLUMN_NAMES, arm_sections
+    arm = [(j, e) for j, e in enumerate(g.effects) if e.name == "arm_coupling"]
+    if not arm:
+        return None
+    for j, e in arm:
+        if not e.causal:
+            raise ValueError(f"MODEL: model.effects[{j}]: effect 'arm_coupling' cannot run on "
+                             f"the firmware with zero-phase columns (they need the rows after "
+                             f"t); refit it on causal columns (cdam residual ... --save FILE "
+                             f"--firmware)")
+    decl = g.declared_model
+    equations = _equation_order(g)
+    eq_index, ncols = [-1] * len(ARM_CHANNELS), [0] * len(ARM_CHANNELS)
+    theta = np.zeros((len(ARM_CHANNELS), ARM_COLS))
+    for j, e in arm:
+        ch = ARM_CHANNELS.index(e.channel)
+        names = COLUMN_NAMES[e.channel]
+        eq_index[ch], ncols[ch] = equations.index(e.channel), len(names)
+        theta[ch, :len(names)] = [g.theta_[f"{e.key}.{n}"] for n in names]
+    filt = g._filter(decl)
+    r = float(decl.derivative_ratio)
+    sos = np.stack([arm_sections(filt.order, filt.cutoff_hz * r, g.dt),
+                    arm_sections(filt.order, decl.joint_filter(filt).cutoff_hz * r, g.dt)])
+    return eq_index, ncols, theta, sos
 
 
 
