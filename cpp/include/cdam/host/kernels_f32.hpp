@@ -1,8 +1,8 @@
 // The float32 BP fitness kernel of the swarm search (issue 23, item 3): the sum of squared errors
 // of one network over a range of samples of a channel-contiguous (SoA) float record, 8 floats a
 // vector on AVX2 + FMA, 16 on AVX-512, chosen at run time; the generic build (SSE2) uses the
-// same 8-float vectors as two xmm. LM stays in double (kernels.hpp); only the optimisers'
-// fitness reads this.
+// same 8-float vectors as two xmm. The swarm's fitness and the float32 LM's trial passes read
+// it; the float32 LM's gradient pass and J'J are the float kernels further down (session 8).
 //
 // Per block of B samples (B = 256: the h x B hidden activations and the block's inputs and
 // targets stay in L1), per vector of W samples:

@@ -24,6 +24,11 @@
 // Otherwise S, C and R come from Eigen's rankUpdate and products, as written above.
 // Mode 0 (the SSE alone: LM's trial and validation passes) in double is host/kernels.hpp's
 // sse_soa on blocks of 128 samples transposed on the fly.
+// Float (issue 23 item 1, session 8), on an AVX2 + FMA CPU: the same layout with blocks padded to
+// 8 rows, host/kernels_f32.hpp's float twins of grad_block and jtj_reduced (float products and
+// sums over 32-sample slices, added into double accumulators: K, Kh, gHp, gOp are double for both
+// Scalars) and its float SSE kernel for mode 0; evaluate_d returns J'e and J'J in double (the
+// float LM solves in double). Otherwise Eigen's float products as before.
 // The hidden activation (double) is the vectorised one of host/kernels.hpp (within 5e-16 of
 // std::tanh / the logistic function; about ten times faster than the scalar libm call).
 // Threads and determinism: the record is cut into chunks of whole blocks whose number
