@@ -51,6 +51,11 @@ def lm_epoch() -> dict:
                 fair_jtj[b] = best_of(lambda: jtj_structured(theta, X, T, h), 5, clk)
         core_jtj = best_of(lambda: _core.mlp_jtj(theta, X, T, h, "tansig", t), 5, clk)
         out[t] = (core / per, min(fair.values()), core_jtj, min(fair_jtj.values()), fair[t])
+    # float32 on 1 thread (issue 23 item 1: float kernels, double sums and solve), same run
+    X32, T32, th32 = X.astype(np.float32), T.astype(np.float32), theta.astype(np.float32)
+    f32 = best_of(lambda: _core.train_lm(th32, X32, T32, h, "tansig", threads=1, **kw), 5,
+                  time.thread_time) / per
+    f32_jtj = best_of(lambda: _core.mlp_jtj(th32, X32, T32, h, "tansig", 1), 5, time.thread_time)
     t_old = best_of(lambda: reference.train_lm(theta, X, T, h, "tansig", **kw), 2) / per
     gf1 = dgemm_gflops(1)
     macs = structured_macs(n, i, h)
@@ -76,6 +81,8 @@ def lm_epoch() -> dict:
         "reduced_bound_seconds": bound_reduced, "jtj_over_reduced_bound": out[1][2] / bound_reduced, "dense_jtj_gflop": n * m * D * (D + 1) / 1e9,
         "dgemm_gflops_1_thread": gf1, "dgemm_gflops_2_threads": dgemm_gflops(2),
         "epochs_timed": epochs, "seconds_per": f"run of {epochs} epochs / {per}",
+        "float32_seconds": f32, "float64_over_float32": out[1][0] / f32,
+        "float32_jtj_seconds": f32_jtj, "float32_over_bound": f32 / epoch_bound,
     }
 
 
@@ -157,15 +164,17 @@ def lm_sizes() -> dict:
     per_h = {}
     for h in (10, 20, 40, 80):
         X, T, theta, _ = _paper_problem(h=h)
+        X32, T32, th32 = X.astype(np.float32), T.astype(np.float32), theta.astype(np.float32)
         core = best_of(lambda: _core.train_lm(theta, X, T, h, "tansig", threads=1, **kw), 3,
                        time.thread_time) / 2
+        # float32 (session 8: the float kernels, double sums and solve), the same run
+        c32 = best_of(lambda: _core.train_lm(th32, X32, T32, h, "tansig", threads=1, **kw), 3,
+                      time.thread_time) / 2
         with blas_threads(1):
             ref = best_of(lambda: train_lm_structured(theta, X, T, h, **kw), 3, time.thread_time) / 2
-        per_h[h] = {"core_seconds": core, "numpy_seconds": ref, "ratio": ref / core}
-    X, T, theta, h = _paper_problem()
-    X32, T32, th32 = X.astype(np.float32), T.astype(np.float32), theta.astype(np.float32)
-    f32 = best_of(lambda: _core.train_lm(th32, X32, T32, h, "tansig", threads=1, **kw), 3,
-                  time.thread_time) / 2
+        per_h[h] = {"core_seconds": core, "numpy_seconds": ref, "ratio": ref / core,
+                    "float32_seconds": c32, "float64_over_float32": core / c32}
+    f32 = per_h[20]["float32_seconds"]
     worst = min(per_h, key=lambda k: per_h[k]["ratio"])
     return {"seconds": per_h[worst]["core_seconds"], "ratio": per_h[worst]["ratio"],
             "reference": f"structured numpy LM, BLAS 1 thread (the smallest ratio, h = {worst})",

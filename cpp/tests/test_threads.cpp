@@ -195,7 +195,7 @@ TEST_CASE("train_lm and train_gd: weights and histories bit-identical at 1, 2 an
   }
 }
 
-TEST_CASE("NormalEquations<float> (Eigen's rank update, not the fused AVX2 one): bit-identical") {
+TEST_CASE("NormalEquations<float> (the float kernels on AVX2 + FMA, Eigen's products otherwise): bit-identical") {
   for (Index n : kSizes) {
     CAPTURE(n);
     const Problem p(4, 6, 3, n, 17);

@@ -1,6 +1,12 @@
 """Residual diagnostics: autocorrelation with the 99 % band, residual-input cross-correlation
 (as MATLAB ``resid``), the Ljung-Box test, the residual spectrum and its peaks, and the
 effective sample size that makes F-tests honest on autocorrelated residuals.
+
+The autocorrelation is statsmodels' ``acf(x, nlags, fft=True)`` written out (``_acf``: the same
+operations in the same order, equal to it bit for bit; tests/residual/test_acf_twin.py), so a
+``cdam residual`` run does not import statsmodels (with pandas, about 0.7 s of its start-up,
+[speed] 23 item 3); statsmodels is imported only where it is still used: the Ljung-Box test of
+records up to 2,000 samples and the flexible joint's identifiability regression.
 """
 from __future__ import annotations
 
@@ -8,12 +14,46 @@ import numpy as np
 from scipy import signal as sps
 from scipy import stats
 from scipy.stats import chi2
-from statsmodels.stats.diagnostic import acorr_ljungbox
-from statsmodels.tsa.stattools import acf as sm_acf
 
 from cdam_core.base.signals import as_signal, positive
 
 Z99 = 2.58  # two-sided 99 % normal quantile, as MATLAB resid's band
+
+
+def _next_regular(target: int) -> int:
+    """The smallest 5-smooth number >= target (statsmodels.compat.scipy._next_regular)."""
+    if target <= 6 or not (target & (target - 1)):
+        return target
+    match = float("inf")
+    p5 = 1
+    while p5 < target:
+        p35 = p5
+        while p35 < target:
+            quotient = -(-target // p35)
+            p2 = 2 ** ((quotient - 1).bit_length())
+            n = p2 * p35
+            if n == target:
+                return n
+            match = min(match, n)
+            p35 *= 3
+            if p35 == target:
+                return p35
+        match = min(p35, match)
+        p5 *= 5
+        if p5 == target:
+            return p5
+    return int(min(p5, match))
+
+
+def _acf(x: np.ndarray, nlags: int) -> np.ndarray:
+    """statsmodels' ``acf(x, nlags=nlags, fft=True)`` (not adjusted, demeaned): the
+    autocovariance by a zero-padded FFT over n, divided by its lag 0."""
+    x = np.asarray(x, dtype=float)
+    nobs = x.size
+    xo = x - x.mean()
+    frf = np.fft.fft(xo, n=_next_regular(2 * nobs + 1))
+    acov = (np.fft.ifft(frf * np.conjugate(frf))[:nobs] / (nobs * np.ones(nobs))).real
+    return acov[: nlags + 1] / acov[0]
 
 
 def autocorrelation(r, max_lag: int = 25) -> dict:
@@ -23,7 +63,7 @@ def autocorrelation(r, max_lag: int = 25) -> dict:
         raise ValueError(f"max_lag: must be in 1..{r.size - 1}, got {max_lag}")
     if np.std(r) == 0:
         raise ValueError("r: constant residual has no autocorrelation")
-    rho = sm_acf(r, nlags=int(max_lag), fft=True)
+    rho = _acf(r, int(max_lag))
     band = Z99 / np.sqrt(r.size)
     outside = [int(k) for k in range(1, rho.size) if abs(rho[k]) > band]
     return {"lags": np.arange(rho.size), "acf": rho, "band": float(band), "outside": outside}
@@ -53,13 +93,14 @@ def ljung_box(r, lags: int = 25) -> dict:
     if h < 1 or h >= r.size:
         raise ValueError(f"lags: must be in 1..{r.size - 1}, got {lags}")
     if r.size <= 2000:
+        from statsmodels.stats.diagnostic import acorr_ljungbox
         res = acorr_ljungbox(r, lags=[h])
         return {"lags": h, "statistic": float(res["lb_stat"].iloc[0]),
                 "pvalue": float(res["lb_pvalue"].iloc[0])}
     # the same Q = N (N + 2) sum rho_k^2 / (N - k) with the FFT autocorrelation:
     # acorr_ljungbox correlates directly, O(N^2), seconds on a 25k-sample record
     n = r.size
-    rho = sm_acf(r, nlags=h, fft=True)[1:]
+    rho = _acf(r, h)[1:]
     q = float(n * (n + 2) * np.sum(rho ** 2 / (n - np.arange(1, h + 1))))
     return {"lags": h, "statistic": q, "pvalue": float(chi2.sf(q, h))}
 
@@ -166,7 +207,7 @@ def effective_sample_size(r, max_lag: int | None = None) -> dict:
     r = as_signal(r, "r")
     n = r.size
     max_lag = min(n - 1, int(max_lag or max(50, n // 20)))
-    rho = sm_acf(r, nlags=max_lag, fft=True)
+    rho = _acf(r, max_lag)
     tau = 1.0
     window = max_lag
     for m in range(1, max_lag + 1):

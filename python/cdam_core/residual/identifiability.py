@@ -15,7 +15,6 @@ reported (a skew, or link damping: the two look alike here).
 from __future__ import annotations
 
 import numpy as np
-import statsmodels.api as sm
 
 from cdam_core.residual import diagnostics as dg
 
@@ -25,6 +24,7 @@ __all__ = ["deflection_check"]
 def deflection_check(sig: dict, trim: int, noise_var: float = 0.0, alpha: float = 0.01) -> dict:
     """``{"identifiable": bool, "p_value", "t_statistic", "acceleration_share", ...}`` for the
     prepared signals of a flexible joint (``theta_m``, ``q`` and their derivatives)."""
+    import statsmodels.api as sm   # here, not at import: about 0.5 s that other models never need
     n = np.asarray(sig["t"]).size
     keep = slice(trim, n - trim)
     d = (np.asarray(sig["theta_m"], dtype=float) - np.asarray(sig["q"], dtype=float))[keep]

@@ -656,14 +656,15 @@ inline double grad_block(const double* Wp, Index i, Index h, Index m, Index hs, 
                                      A, gH, nzp, gO, ha, V, ldv, pa, pe, pg, pz, grad, full);
 }
 
-// The padded weights of grad_block into Wp (hs i + hs + me h + me + hs m doubles, zeros first).
-inline void pad_weights(const Mlp<double>& net, const double* theta, Index hs, Index me,
-                        double* Wp) {
+// The padded weights of grad_block (grad_block_f32 in float) into Wp (hs i + hs + me h + me +
+// hs m values, zeros first).
+template <typename S>
+inline void pad_weights(const Mlp<S>& net, const S* theta, Index hs, Index me, S* Wp) {
   const Index i = net.inputs(), h = net.hidden(), m = net.outputs();
-  const double *W1 = theta, *b1 = theta + net.off_b1(), *W2 = theta + net.off_w2(),
-               *b2 = theta + net.off_b2();
-  double *W1p = Wp, *b1p = W1p + hs * i, *W2p = b1p + hs, *b2p = W2p + me * h, *W2tp = b2p + me;
-  std::memset(Wp, 0, sizeof(double) * static_cast<size_t>(hs * i + hs + me * h + me + hs * m));
+  const S *W1 = theta, *b1 = theta + net.off_b1(), *W2 = theta + net.off_w2(),
+          *b2 = theta + net.off_b2();
+  S *W1p = Wp, *b1p = W1p + hs * i, *W2p = b1p + hs, *b2p = W2p + me * h, *W2tp = b2p + me;
+  std::memset(Wp, 0, sizeof(S) * static_cast<size_t>(hs * i + hs + me * h + me + hs * m));
   for (Index l = 0; l < i; ++l)
     for (Index j = 0; j < h; ++j) W1p[l * hs + j] = W1[l * h + j];
   for (Index j = 0; j < h; ++j) b1p[j] = b1[j];

@@ -1,8 +1,8 @@
 // The float32 BP fitness kernel of the swarm search (issue 23, item 3): the sum of squared errors
 // of one network over a range of samples of a channel-contiguous (SoA) float record, 8 floats a
 // vector on AVX2 + FMA, 16 on AVX-512, chosen at run time; the generic build (SSE2) uses the
-// same 8-float vectors as two xmm. LM stays in double (kernels.hpp); only the optimisers'
-// fitness reads this.
+// same 8-float vectors as two xmm. The swarm's fitness and the float32 LM's trial passes read
+// it; the float32 LM's gradient pass and J'J are the float kernels further down (session 8).
 //
 // Per block of B samples (B = 256: the h x B hidden activations and the block's inputs and
 // targets stay in L1), per vector of W samples:
@@ -145,6 +145,226 @@ inline float tanh1(float x) {
       const float *__restrict X, const float *__restrict T, Index ld, Index n,                \
       float *__restrict a, Index B
 
+// ---- The float32 LM kernels (issue 23 item 1, session 8): the float twins of kernels.hpp's
+// grad_block and jtj_reduced, for NormalEquations<float> on an AVX2 + FMA CPU (AVX2 and
+// AVX-512 builds, chosen at run time). Products and the sums over one slice of at most
+// kLmSlice samples in float (8 floats a vector: twice the multiply-adds of a double vector a
+// cycle), then each tile's float sums added into double accumulators (the record's sums over
+// 10,000 samples and more stay in double: a float running sum would lose about 4 digits over
+// them, and the LM's Cholesky with it). Layouts, padding and arguments as in kernels.hpp, the
+// padded blocks of hidden units and outputs to a multiple of 8.
+
+// Samples per slice of the float tiles (the float sums' length before they go to double).
+constexpr Index kLmSlice = 32;
+
+// acc (8 floats) added to the 8 doubles at g.
+#define CDAM_F32_ADD8(g, acc)                                                                 \
+  do {                                                                                        \
+    v8d d_ = __builtin_convertvector((acc), v8d), g_;                                        \
+    std::memcpy(&g_, (g), sizeof g_);                                                         \
+    g_ += d_;                                                                                 \
+    std::memcpy((g), &g_, sizeof g_);                                                         \
+  } while (0)
+
+// G (double, leading dimension ldg) += X W^T over ns <= kLmSlice samples: X R rows, W C rows
+// (float, one sample a column, leading dimension ldv). lower: tiles from the diagonal down (as
+// kernels.hpp's tiles). Tiles of 16 rows x 4 columns in 8 float registers, then 8 x 4, then
+// one row at a time.
+#define CDAM_F32_TILES_BODY                                                                   \
+  typedef float v8f __attribute__((vector_size(32)));                                         \
+  typedef double v8d __attribute__((vector_size(64)));                                        \
+  Index c0 = 0;                                                                               \
+  for (; c0 + 4 <= C; c0 += 4) {                                                              \
+    /* lower: from the 8-row boundary at or above the diagonal (no one-row remainders when   \
+       R is a multiple of 8; the few sums above the diagonal are never read) */              \
+    Index r = lower ? c0 - c0 % 8 : 0;                                                        \
+    for (; r + 16 <= R; r += 16) {                                                            \
+      v8f a0 = {}, a1 = a0, a2 = a0, a3 = a0, b0 = a0, b1 = a0, b2 = a0, b3 = a0;             \
+      for (Index s = 0; s < ns; ++s) {                                                        \
+        const float* xc = X + s * ldv;                                                        \
+        const float* wc = W + s * ldv;                                                        \
+        v8f x, y;                                                                             \
+        std::memcpy(&x, xc + r, sizeof x);                                                    \
+        std::memcpy(&y, xc + r + 8, sizeof y);                                                \
+        const float w0 = wc[c0], w1 = wc[c0 + 1], w2 = wc[c0 + 2], w3 = wc[c0 + 3];           \
+        a0 += x * w0; a1 += x * w1; a2 += x * w2; a3 += x * w3;                               \
+        b0 += y * w0; b1 += y * w1; b2 += y * w2; b3 += y * w3;                               \
+      }                                                                                       \
+      double* g = G + r + c0 * ldg;                                                           \
+      CDAM_F32_ADD8(g, a0); CDAM_F32_ADD8(g + ldg, a1);                                       \
+      CDAM_F32_ADD8(g + 2 * ldg, a2); CDAM_F32_ADD8(g + 3 * ldg, a3);                         \
+      CDAM_F32_ADD8(g + 8, b0); CDAM_F32_ADD8(g + 8 + ldg, b1);                               \
+      CDAM_F32_ADD8(g + 8 + 2 * ldg, b2); CDAM_F32_ADD8(g + 8 + 3 * ldg, b3);                 \
+    }                                                                                         \
+    for (; r + 8 <= R; r += 8) { /* even and odd samples apart: 8 independent chains */     \
+      v8f a0 = {}, a1 = a0, a2 = a0, a3 = a0, e0 = a0, e1 = a0, e2 = a0, e3 = a0;             \
+      Index s = 0;                                                                            \
+      for (; s + 2 <= ns; s += 2) {                                                           \
+        const float* wc = W + s * ldv;                                                        \
+        const float* wd = wc + ldv;                                                           \
+        v8f x, y;                                                                             \
+        std::memcpy(&x, X + s * ldv + r, sizeof x);                                           \
+        std::memcpy(&y, X + (s + 1) * ldv + r, sizeof y);                                     \
+        a0 += x * wc[c0]; a1 += x * wc[c0 + 1]; a2 += x * wc[c0 + 2]; a3 += x * wc[c0 + 3];   \
+        e0 += y * wd[c0]; e1 += y * wd[c0 + 1]; e2 += y * wd[c0 + 2]; e3 += y * wd[c0 + 3];   \
+      }                                                                                       \
+      for (; s < ns; ++s) {                                                                   \
+        const float* wc = W + s * ldv;                                                        \
+        v8f x;                                                                                \
+        std::memcpy(&x, X + s * ldv + r, sizeof x);                                           \
+        a0 += x * wc[c0]; a1 += x * wc[c0 + 1]; a2 += x * wc[c0 + 2]; a3 += x * wc[c0 + 3];   \
+      }                                                                                       \
+      a0 += e0; a1 += e1; a2 += e2; a3 += e3;                                                 \
+      double* g = G + r + c0 * ldg;                                                           \
+      CDAM_F32_ADD8(g, a0); CDAM_F32_ADD8(g + ldg, a1);                                       \
+      CDAM_F32_ADD8(g + 2 * ldg, a2); CDAM_F32_ADD8(g + 3 * ldg, a3);                         \
+    }                                                                                         \
+    for (; r < R; ++r)                                                                        \
+      for (Index c = c0; c < c0 + 4; ++c) {                                                   \
+        float acc = 0.0f;                                                                     \
+        for (Index s = 0; s < ns; ++s) acc += X[r + s * ldv] * W[c + s * ldv];                \
+        G[r + c * ldg] += static_cast<double>(acc);                                           \
+      }                                                                                       \
+  }                                                                                           \
+  for (; c0 < C; ++c0)                                                                        \
+    for (Index r = lower ? c0 : 0; r < R; ++r) {                                              \
+      float acc = 0.0f;                                                                       \
+      for (Index s = 0; s < ns; ++s) acc += X[r + s * ldv] * W[c0 + s * ldv];                 \
+      G[r + c0 * ldg] += static_cast<double>(acc);                                            \
+    }
+
+// The reduced J'J sums (kernels.hpp's CDAM_JTJR_BODY) from float rows: per slice of kLmSlice
+// samples the pair products d_j d_j' (hw rows) and z_l z_l' (nu rows) in float in buf (ld
+// hw + nu, kLmSlice columns and 8 floats of slack), Kh (double) += their products; K (double)
+// the C and R blocks from V's [a; 1] against [v; a; 1].
+#define CDAM_F32_JTJR_BODY                                                                    \
+  typedef float v8f __attribute__((vector_size(32)));                                         \
+  const Index P = nz * hs, ldb = hw + nu, hp = h * (h + 1) / 2;                               \
+  const float* Dv = V + (nz - 1) * hs;                                                        \
+  for (Index s0 = 0; s0 < nb; s0 += kLmSlice) {                                               \
+    const Index ns = nb - s0 < kLmSlice ? nb - s0 : kLmSlice;                                 \
+    for (Index s = 0; s < ns; ++s) {                                                          \
+      const float* d = Dv + (s0 + s) * ldv;                                                   \
+      const float* x = X + (s0 + s) * ldx;                                                    \
+      float* w = buf + s * ldb;                                                               \
+      /* whole 8-vectors: row j's last store runs up to 7 values into the rows after it      \
+         (written next), the padding, u or the next sample (written after; the buffer's      \
+         slack past the last); d is read within its padded block */                          \
+      for (Index j = 0; j < h; ++j) {                                                         \
+        const float dj = d[j];                                                                \
+        float* wj = w + j * (j + 1) / 2;                                                      \
+        for (Index j2 = 0; j2 <= j; j2 += 8) {                                                \
+          v8f dv;                                                                             \
+          std::memcpy(&dv, d + j2, sizeof dv);                                                \
+          dv *= dj;                                                                           \
+          std::memcpy(wj + j2, &dv, sizeof dv);                                               \
+        }                                                                                     \
+      }                                                                                       \
+      for (Index q = hp; q < hw; ++q) w[q] = 0.0f;                                            \
+      float* u = w + hw;                                                                      \
+      Index q = 0;                                                                            \
+      for (Index l = 0; l < nz; ++l) {                                                        \
+        const float zl = l + 1 < nz ? x[l] : 1.0f;                                            \
+        for (Index l2 = 0; l2 <= l; ++l2) u[q++] = zl * (l2 + 1 < nz ? x[l2] : 1.0f);         \
+      }                                                                                       \
+      for (; q < nu; ++q) u[q] = 0.0f;                                                        \
+    }                                                                                         \
+    lm_tiles(Kh, ldh, buf, buf + hw, ldb, hw, nu, ns, false);                                 \
+    const float* Vs = V + s0 * ldv;                                                           \
+    lm_tiles(K, ldk, Vs + P, Vs, ldv, ha, P, ns, false);                                      \
+    lm_tiles(K + P * ldk, ldk, Vs + P, Vs + P, ldv, ha, ha, ns, true);                        \
+  }
+
+// The gradient pass (kernels.hpp's CDAM_FB_BODY) in float: 8 hidden units or outputs a vector
+// (hs, me multiples of 8), the activation by this file's float tanh; the sse of the block in
+// double (each squared error in float, as the SSE kernel), the gradient sums into gH, gO
+// (double) per slice by lm_tiles.
+#define CDAM_F32_FB_BODY                                                                      \
+  CDAM_F32_VECTORS(8)                                                                         \
+  for (Index s = 0; s < nb; ++s) {                                                            \
+    const float* x = X + s * i;                                                               \
+    for (Index j0 = 0; j0 < hs; j0 += 8) {                                                    \
+      vf acc;                                                                                 \
+      std::memcpy(&acc, b1p + j0, sizeof acc);                                                \
+      for (Index l = 0; l < i; ++l) {                                                         \
+        vf w;                                                                                 \
+        std::memcpy(&w, W1p + l * hs + j0, sizeof w);                                         \
+        acc += w * x[l];                                                                      \
+      }                                                                                       \
+      CDAM_F32_TANH(acc);                                                                     \
+      std::memcpy(A + s * hs + j0, &acc, sizeof acc);                                         \
+    }                                                                                         \
+  }                                                                                           \
+  double sse = 0.0;                                                                           \
+  for (Index s = 0; s < nb; ++s) {                                                            \
+    const float* x = X + s * i;                                                               \
+    const float* t = T + s * m;                                                               \
+    const float* as = A + s * hs;                                                             \
+    float* vs = V + s * ldv;                                                                  \
+    float* e = vs + pe;                                                                       \
+    for (Index k0 = 0; k0 < me; k0 += 8) {                                                    \
+      vf acc;                                                                                 \
+      std::memcpy(&acc, b2p + k0, sizeof acc);                                                \
+      for (Index j = 0; j < h; ++j) {                                                         \
+        vf w;                                                                                 \
+        std::memcpy(&w, W2p + j * me + k0, sizeof w);                                         \
+        acc += w * as[j];                                                                     \
+      }                                                                                       \
+      std::memcpy(e + k0, &acc, sizeof acc);                                                  \
+    }                                                                                         \
+    for (Index k = 0; k < m; ++k) {                                                           \
+      e[k] = t[k] - e[k];                                                                     \
+      sse += static_cast<double>(e[k] * e[k]);                                                \
+    }                                                                                         \
+    if (!grad) continue;                                                                      \
+    for (Index k = m; k < me; ++k) e[k] = 0.0f;                                               \
+    for (Index j0 = 0; j0 < hs; j0 += 8) {                                                    \
+      vf acc = {}, av;                                                                        \
+      for (Index k = 0; k < m; ++k) {                                                         \
+        vf w;                                                                                 \
+        std::memcpy(&w, W2tp + k * hs + j0, sizeof w);                                        \
+        acc += w * e[k];                                                                      \
+      }                                                                                       \
+      std::memcpy(&av, as + j0, sizeof av);                                                   \
+      const vf dv = tansig ? 1.0f - av * av : av * (1.0f - av);                               \
+      acc *= dv;                                                                              \
+      std::memcpy(vs + pg + j0, &acc, sizeof acc);                                            \
+      if (full) {                                                                             \
+        for (Index l = 0; l < i; ++l) {                                                       \
+          const vf vl = dv * x[l];                                                            \
+          std::memcpy(vs + l * hs + j0, &vl, sizeof vl);                                      \
+        }                                                                                     \
+        std::memcpy(vs + i * hs + j0, &dv, sizeof dv);                                        \
+      }                                                                                       \
+    }                                                                                         \
+    std::memcpy(vs + pa, as, sizeof(float) * h);                                              \
+    std::memcpy(vs + pz, x, sizeof(float) * i);                                               \
+  }                                                                                           \
+  for (Index s0 = 0; grad && s0 < nb; s0 += kLmSlice) {                                       \
+    const Index ns = nb - s0 < kLmSlice ? nb - s0 : kLmSlice;                                 \
+    const float* Vs = V + s0 * ldv;                                                           \
+    lm_tiles(gO, me, Vs + pe, Vs + pa, ldv, me, ha, ns, false);                               \
+    lm_tiles(gH, hs, Vs + pg, Vs + pz, ldv, hs, nzp, ns, false);                              \
+  }                                                                                           \
+  return sse;
+
+#define CDAM_F32_LMT_ARGS                                                                     \
+  double *__restrict G, Index ldg, const float *__restrict X, const float *__restrict W,      \
+      Index ldv, Index R, Index C, Index ns, bool lower
+
+#define CDAM_F32_JTJR_ARGS                                                                    \
+  double *__restrict Kh, Index ldh, double *__restrict K, Index ldk,                          \
+      const float *__restrict V, Index ldv, const float *__restrict X, Index ldx, Index h,     \
+      Index hs, Index ha, Index nz, Index hw, Index nu, Index nb, float *__restrict buf
+
+#define CDAM_F32_FB_ARGS                                                                      \
+  const float *__restrict W1p, const float *__restrict b1p, const float *__restrict W2p,      \
+      const float *__restrict b2p, const float *__restrict W2tp, Index i, Index h, Index m,   \
+      Index hs, Index me, bool tansig, const float *__restrict X, const float *__restrict T,  \
+      Index nb, float *__restrict A, double *__restrict gH, Index nzp,                        \
+      double *__restrict gO, Index ha, float *__restrict V, Index ldv, Index pa, Index pe,    \
+      Index pg, Index pz, bool grad, bool full
+
 constexpr Index kMaxIn = 12;  // inputs kept in registers (more are loaded from L1)
 
 namespace generic {
@@ -152,6 +372,9 @@ inline double sse_block(CDAM_F32_SSE_ARGS) {
   CDAM_F32_VECTORS(8)
   CDAM_F32_SSE_BODY
 }
+inline void lm_tiles(CDAM_F32_LMT_ARGS) { CDAM_F32_TILES_BODY }
+inline void jtj_reduced(CDAM_F32_JTJR_ARGS) { CDAM_F32_JTJR_BODY }
+inline double grad_block(CDAM_F32_FB_ARGS) { CDAM_F32_FB_BODY }
 }  // namespace generic
 
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
@@ -161,12 +384,28 @@ __attribute__((target("avx2,fma"))) inline double sse_block(CDAM_F32_SSE_ARGS) {
   CDAM_F32_VECTORS(8)
   CDAM_F32_SSE_BODY
 }
+__attribute__((target("avx2,fma"))) inline void lm_tiles(CDAM_F32_LMT_ARGS) {
+  CDAM_F32_TILES_BODY
+}
+__attribute__((target("avx2,fma"))) inline void jtj_reduced(CDAM_F32_JTJR_ARGS) {
+  CDAM_F32_JTJR_BODY
+}
+__attribute__((target("avx2,fma"))) inline double grad_block(CDAM_F32_FB_ARGS) {
+  CDAM_F32_FB_BODY
+}
 }  // namespace avx2
 namespace avx512 {
 __attribute__((target("avx512f,avx512vl,avx2,fma"))) inline double sse_block(CDAM_F32_SSE_ARGS) {
   CDAM_F32_VECTORS(16)
   CDAM_F32_SSE_BODY
 }
+// The LM kernels with AVX-512VL's 32 vector registers and instructions (the same 8-float
+// vectors: the tiles' shape is the AVX2 one).
+#define CDAM_TARGET_512 __attribute__((target("avx512f,avx512vl,avx2,fma")))
+CDAM_TARGET_512 inline void lm_tiles(CDAM_F32_LMT_ARGS) { CDAM_F32_TILES_BODY }
+CDAM_TARGET_512 inline void jtj_reduced(CDAM_F32_JTJR_ARGS) { CDAM_F32_JTJR_BODY }
+CDAM_TARGET_512 inline double grad_block(CDAM_F32_FB_ARGS) { CDAM_F32_FB_BODY }
+#undef CDAM_TARGET_512
 }  // namespace avx512
 inline int cpu_level() {  // 2: AVX-512F, 1: AVX2 + FMA, 0: neither
   static const int level = __builtin_cpu_supports("avx512f") ? 2
@@ -181,6 +420,13 @@ inline int cpu_level() { return 0; }
 
 #undef CDAM_F32_TANH
 #undef CDAM_F32_TANH_BODY
+#undef CDAM_F32_ADD8
+#undef CDAM_F32_TILES_BODY
+#undef CDAM_F32_JTJR_BODY
+#undef CDAM_F32_FB_BODY
+#undef CDAM_F32_LMT_ARGS
+#undef CDAM_F32_JTJR_ARGS
+#undef CDAM_F32_FB_ARGS
 #undef CDAM_F32_SSE_BODY
 #undef CDAM_F32_SSE_ARGS
 #undef CDAM_F32_VECTORS
@@ -214,6 +460,47 @@ inline double sse_soa_f32(Index i, Index h, Index m, Activation act, const float
 #endif
   (void)path;
   return kernel_f32::generic::sse_block(W1, b1, W2, b2, i, h, m, tansig, X, T, ld, n, a, B);
+}
+
+// The float LM kernels (CDAM_F32_FB_BODY, CDAM_F32_JTJR_BODY; overloads of kernels.hpp's
+// grad_block and jtj_reduced on float rows) on the CPU's path: AVX-512 or
+// AVX2 + FMA (NormalEquations<float> calls them only when the CPU has AVX2 + FMA), else the
+// generic build. Arguments as kernels.hpp's grad_block and jtj_reduced, the sums in double.
+inline double grad_block(const float* Wp, Index i, Index h, Index m, Index hs, Index me,
+                             bool tansig, const float* X, const float* T, Index nb, float* A,
+                             double* gH, Index nzp, double* gO, Index ha, float* V, Index ldv,
+                             Index pa, Index pe, Index pg, Index pz, bool grad, bool full) {
+  const float *W1p = Wp, *b1p = W1p + hs * i, *W2p = b1p + hs, *b2p = W2p + me * h,
+              *W2tp = b2p + me;
+#if CDAM_HAVE_F32_CLONES
+  if (kernel_f32::cpu_level() >= 2)
+    return kernel_f32::avx512::grad_block(W1p, b1p, W2p, b2p, W2tp, i, h, m, hs, me, tansig, X,
+                                          T, nb, A, gH, nzp, gO, ha, V, ldv, pa, pe, pg, pz,
+                                          grad, full);
+  if (kernel_f32::cpu_level() >= 1)
+    return kernel_f32::avx2::grad_block(W1p, b1p, W2p, b2p, W2tp, i, h, m, hs, me, tansig, X, T,
+                                        nb, A, gH, nzp, gO, ha, V, ldv, pa, pe, pg, pz, grad,
+                                        full);
+#endif
+  return kernel_f32::generic::grad_block(W1p, b1p, W2p, b2p, W2tp, i, h, m, hs, me, tansig, X,
+                                         T, nb, A, gH, nzp, gO, ha, V, ldv, pa, pe, pg, pz, grad,
+                                         full);
+}
+
+// buf: (hw + nu) kLmSlice + 8 floats of caller storage.
+inline void jtj_reduced(double* Kh, Index ldh, double* K, Index ldk, const float* V,
+                            Index ldv, const float* X, Index ldx, Index h, Index hs, Index ha,
+                            Index nz, Index hw, Index nu, Index nb, float* buf) {
+#if CDAM_HAVE_F32_CLONES
+  if (kernel_f32::cpu_level() >= 2)
+    return kernel_f32::avx512::jtj_reduced(Kh, ldh, K, ldk, V, ldv, X, ldx, h, hs, ha, nz, hw,
+                                           nu, nb, buf);
+  if (kernel_f32::cpu_level() >= 1)
+    return kernel_f32::avx2::jtj_reduced(Kh, ldh, K, ldk, V, ldv, X, ldx, h, hs, ha, nz, hw, nu,
+                                         nb, buf);
+#endif
+  kernel_f32::generic::jtj_reduced(Kh, ldh, K, ldk, V, ldv, X, ldx, h, hs, ha, nz, hw, nu, nb,
+                                   buf);
 }
 
 }  // namespace cdam::host

@@ -24,6 +24,11 @@
 // Otherwise S, C and R come from Eigen's rankUpdate and products, as written above.
 // Mode 0 (the SSE alone: LM's trial and validation passes) in double is host/kernels.hpp's
 // sse_soa on blocks of 128 samples transposed on the fly.
+// Float (issue 23 item 1, session 8), on an AVX2 + FMA CPU: the same layout with blocks padded to
+// 8 rows, host/kernels_f32.hpp's float twins of grad_block and jtj_reduced (float products and
+// sums over 32-sample slices, added into double accumulators: K, Kh, gHp, gOp are double for both
+// Scalars) and its float SSE kernel for mode 0; evaluate_d returns J'e and J'J in double (the
+// float LM solves in double). Otherwise Eigen's float products as before.
 // The hidden activation (double) is the vectorised one of host/kernels.hpp (within 5e-16 of
 // std::tanh / the logistic function; about ten times faster than the scalar libm call).
 // Threads and determinism: the record is cut into chunks of whole blocks whose number
@@ -53,6 +58,7 @@
 
 #include "../mlp.hpp"
 #include "kernels.hpp"
+#include "kernels_f32.hpp"
 
 namespace cdam {
 
@@ -63,6 +69,9 @@ class NormalEquations {
   using Vec = Eigen::Matrix<Scalar, Eigen::Dynamic, 1>;
   using ConstMap = Eigen::Map<const Mat>;
   using Net = Mlp<Scalar>;
+  // The record's sums (the fused path's accumulators, J'J and J'e before the output's type).
+  using MatD = Eigen::MatrixXd;
+  using VecD = Eigen::VectorXd;
 
   // A record of B blocks of samples is cut into clamp(B / kMinChunkBlocks, 1, kMaxChunks)
   // chunks of whole blocks (a record of fewer than 4 blocks is one chunk).
@@ -77,6 +86,8 @@ class NormalEquations {
     for (Index t = 0; t < nt; ++t) scratch_.emplace_back(net_, block_);
     const Index P = net_.hidden() * (net_.inputs() + 1);
     S_.resize(P, P);
+    C_.resize(net_.hidden() + 1, P);
+    R_.resize(net_.hidden() + 1, net_.hidden() + 1);
   }
 
   int threads() const { return threads_; }
@@ -97,6 +108,17 @@ class NormalEquations {
   // total is therefore ((p0 + p1) + p2) + ... whoever computed each p: bit-identical for any
   // thread count.
   double evaluate(const Scalar* theta, const ConstMap& X, const ConstMap& T, Vec* jte, Mat* jtj) {
+    return evaluate_into(theta, X, T, jte, jtj);
+  }
+  // The same with J'e and J'J in double whatever the Scalar (the float LM's solve).
+  double evaluate_d(const Scalar* theta, const ConstMap& X, const ConstMap& T, VecD* jte,
+                    MatD* jtj) {
+    return evaluate_into(theta, X, T, jte, jtj);
+  }
+
+  template <class VOut, class MOut>
+  double evaluate_into(const Scalar* theta, const ConstMap& X, const ConstMap& T, VOut* jte,
+                       MOut* jtj) {
     const Index n = X.cols();
     const Index nc = chunks(n);
     const int mode = jtj ? 2 : (jte ? 1 : 0);
@@ -138,15 +160,18 @@ class NormalEquations {
       for (auto& th : pool) th.join();
     }
     Slot& s = total_;
-    if (mode >= 1 && s.fused) {
-      s.gH = s.gHp.topLeftCorner(s.gH.rows(), s.gH.cols());
-      s.gO = s.gOp.topLeftCorner(s.gO.rows(), s.gO.cols());
+    const Index h = net_.hidden();
+    if (mode >= 1) {
+      if (s.fused)
+        assemble_gradient(s.gHp.topLeftCorner(h, s.gH.cols()),
+                          s.gOp.topLeftCorner(s.gO.rows(), h + 1), *jte);
+      else
+        assemble_gradient(s.gH, s.gO, *jte);
     }
-    if (mode >= 1) assemble_gradient(s, *jte);
     if (mode == 2) {
-      const Index P = s.C.cols(), h = net_.hidden();
+      const Index P = s.C.cols();
       if (s.fused) {  // S from the pair sums Kh, C and R from the padded K
-        const Index hs = pad4(h), nz = P / h, Pp = nz * hs;
+        const Index hs = padv(h), nz = P / h, Pp = nz * hs;
         for (Index l = 0; l < nz; ++l) {
           for (Index l2 = 0; l2 <= l; ++l2) {
             const Index cu = l * (l + 1) / 2 + l2;
@@ -154,13 +179,15 @@ class NormalEquations {
               for (Index j = j2; j < h; ++j)
                 S_(l * h + j, l2 * h + j2) = s.Kh(j * (j + 1) / 2 + j2, cu);
           }
-          s.C.middleCols(l * h, h) = s.K.block(0, l * hs, h + 1, h);
+          C_.middleCols(l * h, h) = s.K.block(0, l * hs, h + 1, h);
         }
-        s.R.template triangularView<Eigen::Lower>() = s.K.block(0, Pp, h + 1, h + 1);
+        R_.template triangularView<Eigen::Lower>() = s.K.block(0, Pp, h + 1, h + 1);
       } else {
-        S_.template triangularView<Eigen::Lower>() = s.S;
+        S_.template triangularView<Eigen::Lower>() = s.S.template cast<double>();
+        C_ = s.C.template cast<double>();
+        R_.template triangularView<Eigen::Lower>() = s.R.template cast<double>();
       }
-      assemble_jtj(theta, s, *jtj);
+      assemble_jtj(theta, *jtj);
     }
     return s.sse;
   }
@@ -178,8 +205,16 @@ class NormalEquations {
  private:
   // Rows of a block of V in the fused layout: h (or h + 1) padded to a multiple of 4, so the
   // register tiles have no one-row remainders (session 6, h = 10: J'J 5.6 -> 1.8 ms, h = 20:
-  // 5.6 -> 4.7 ms on 10,000 samples; the sums of the padded rows are never read).
+  // 5.6 -> 4.7 ms on 10,000 samples; the sums of the padded rows are never read); in float to
+  // a multiple of 8 (the float kernels' vectors).
   static Index pad4(Index r) { return (r + 3) / 4 * 4; }
+  static constexpr Index kV = std::is_same<Scalar, double>::value ? 4 : 8;
+  static Index padv(Index r) { return (r + kV - 1) / kV * kV; }
+  // Samples per slice of the pair products (Scratch::Pb's columns; float: one more column, the
+  // float kernel's slack for its whole-vector stores).
+  static constexpr Index kSlice = std::is_same<Scalar, double>::value
+                                      ? host::kernel::kPairSlice
+                                      : host::kernel_f32::kLmSlice + 1;
   // Rows of the reduced J'J's pair sums (host::jtj_reduced): the h (h + 1) / 2 products
   // d_j d_j' padded to a multiple of 8 (whole 8 x 4 tiles), the nz (nz + 1) / 2 products
   // z_l z_l' to a multiple of 4.
@@ -190,18 +225,20 @@ class NormalEquations {
   // e at pe (me), g at pg (hg), [x; 1] at pz (nzp); each padded to a multiple of 4.
   static Index wp_size(const Net& n) {
     const Index i = n.inputs(), h = n.hidden(), m = n.outputs();
-    return pad4(h) * (i + 1) + pad4(m) * (h + 1) + pad4(h) * m;
+    return padv(h) * (i + 1) + padv(m) * (h + 1) + padv(h) * m;
   }
   struct Lay {
     Index hs, ha, me, hg, nzp, pa, pe, pg, pz, rows;
     Lay(Index i, Index h, Index m)
-        : hs(pad4(h)), ha(pad4(h + 1)), me(pad4(m)), hg(pad4(h)), nzp(pad4(i + 1)),
+        : hs(padv(h)), ha(padv(h + 1)), me(padv(m)), hg(padv(h)), nzp(padv(i + 1)),
           pa(hs * (i + 1)), pe(pa + ha), pg(pe + me), pz(pg + hg), rows(pz + nzp) {}
   };
 
+  // The hand kernels: double on an AVX2 + FMA CPU (kernels.hpp), float likewise (kernels_f32.hpp's
+  // float twins, AVX-512 when the CPU has it); otherwise Eigen's products.
   static bool fused_path() {
     if constexpr (std::is_same<Scalar, double>::value) return host::avx2_path(host::KernelPath::Auto);
-    return false;
+    return host::kernel_f32::cpu_level() >= 1;
   }
 
   // The partial sums of one chunk: sse, the gradient blocks, and the J'J blocks (fused: C
@@ -210,23 +247,23 @@ class NormalEquations {
     bool fused;
     double sse = 0.0;
     Mat gH, gO;                // h x (i+1), m x (h+1)
-    Mat gHp, gOp;              // fused: hg x nzp, me x ha (Lay), their top-left corners gH, gO
-    Mat S, R, C, K, Kh;        // h(i+1) sq (not fused), (h+1) sq, (h+1) x h(i+1);
-                               // fused: K pad4(h+1) x (pad4(h)(i+1) + pad4(h+1)), Kh hw x nu
+    MatD gHp, gOp;             // fused: hg x nzp, me x ha (Lay), their top-left corners gH, gO
+    Mat S, R, C;               // not fused: h(i+1) sq, (h+1) sq, (h+1) x h(i+1)
+    MatD K, Kh;                // fused: K padv(h+1) x (padv(h)(i+1) + padv(h+1)), Kh hw x nu
 
     Slot(const Net& n_, bool fused_) : fused(fused_) {
       const Index i = n_.inputs(), h = n_.hidden(), m = n_.outputs(), P = h * (i + 1);
       gH.resize(h, i + 1);
       gO.resize(m, h + 1);
-      R.resize(h + 1, h + 1);
-      C.resize(h + 1, P);
+      C.resize(h + 1, P);   // its size is read on both paths; its values on Eigen's
       if (fused) {
         const Lay L(i, h, m);
         gHp.resize(L.hg, L.nzp);
         gOp.resize(L.me, L.ha);
-        K.resize(pad4(h + 1), pad4(h) * (i + 1) + pad4(h + 1));
+        K.resize(padv(h + 1), padv(h) * (i + 1) + padv(h + 1));
         Kh.resize(pairs_h(h), pairs_z(i + 1));
       } else {
+        R.resize(h + 1, h + 1);
         S.resize(P, P);
       }
     }
@@ -238,10 +275,8 @@ class NormalEquations {
         else { gH.setZero(); gO.setZero(); }
       }
       if (mode == 2) {
-        R.setZero();
-        C.setZero();
         if (fused) { K.setZero(); Kh.setZero(); }
-        else band(S, [](auto c, auto) { c.setZero(); });
+        else { R.setZero(); C.setZero(); band(S, [](auto c, auto) { c.setZero(); }); }
       }
     }
 
@@ -252,10 +287,8 @@ class NormalEquations {
         else { gH += o.gH; gO += o.gO; }
       }
       if (mode == 2) {
-        R += o.R;
-        C += o.C;
         if (fused) { K += o.K; Kh += o.Kh; }
-        else band(S, o.S, [](auto c, auto oc) { c += oc; });
+        else { R += o.R; C += o.C; band(S, o.S, [](auto c, auto oc) { c += oc; }); }
       }
     }
 
@@ -287,15 +320,15 @@ class NormalEquations {
     Mat Xs, Ts;                // kSseBlock x i, kSseBlock x m: one block, channel-contiguous
     Mat Pb;                    // fused: the pair products of one slice (host::jtj_reduced)
     Vec Wp;                    // fused: host::pad_weights' padded weights
-    bool fused;                // double on an AVX2 + FMA CPU: one SYRK gives S, C and R
+    bool fused;                // on an AVX2 + FMA CPU: the hand kernels (fused_path)
     Slot part;
 
     Scratch(const Net& n_, Index B)
         : net(n_), i(n_.inputs()), h(n_.hidden()), m(n_.outputs()),
-          A(fused_path() ? pad4(h) : h, std::max(B, kSseBlock)), D(h, B), Y(m, B), E(m, B), G(h, B),
+          A(fused_path() ? padv(h) : h, std::max(B, kSseBlock)), D(h, B), Y(m, B), E(m, B), G(h, B),
           V(fused_path() ? Lay(n_.inputs(), n_.hidden(), n_.outputs()).rows : h * (i + 1) + h + 1, B),
           Xs(kSseBlock, i), Ts(kSseBlock, m),
-          Pb(fused_path() ? pairs_h(h) + pairs_z(i + 1) : 0, host::kernel::kPairSlice),
+          Pb(fused_path() ? pairs_h(h) + pairs_z(i + 1) : 0, kSlice),
           Wp(fused_path() ? wp_size(n_) : 0), fused(fused_path()), part(n_, fused) {
       // the fused layout (Lay): block l of v at row l hs, a at pa, then the row of ones (the
       // row sums), e, g, x and its row of ones; padding rows zero (never written after this)
@@ -319,8 +352,12 @@ class NormalEquations {
         const Index nb = std::min(kSseBlock, hi - b0);
         Xs.topRows(nb) = X.middleCols(b0, nb).transpose();
         Ts.topRows(nb) = T.middleCols(b0, nb).transpose();
-        sse += host::sse_soa(net, theta, Xs.data(), Ts.data(), kSseBlock, nb, A.data(),
-                             kSseBlock);
+        if constexpr (std::is_same<Scalar, double>::value)
+          sse += host::sse_soa(net, theta, Xs.data(), Ts.data(), kSseBlock, nb, A.data(),
+                               kSseBlock);
+        else  // float: kernels_f32.hpp's SSE kernel (AVX-512 when the CPU has it)
+          sse += host::sse_soa_f32(i, h, m, net.activation(), theta, Xs.data(), Ts.data(),
+                                   kSseBlock, nb, A.data(), kSseBlock, host::f32_path());
       }
       return sse;
     }
@@ -343,17 +380,15 @@ class NormalEquations {
     void run(const Scalar* theta, const ConstMap& X, const ConstMap& T, Index lo, Index hi,
              int mode, Slot& out) {
       out.clear(mode);
-      if constexpr (std::is_same<Scalar, double>::value) {
-        if (mode == 0) {
-          out.sse = sse_kernel(theta, X, T, lo, hi);
-          return;
-        }
+      if (mode == 0 && (std::is_same<Scalar, double>::value || fused)) {
+        out.sse = sse_kernel(theta, X, T, lo, hi);
+        return;
       }
       const Index P = h * (i + 1);
       const Index B = D.cols();   // A may be wider (the SSE pass's block)
       const Activation act = net.activation();
-      if constexpr (std::is_same<Scalar, double>::value) {
-        if (fused) {  // the hand gradient pass and the reduced J'J kernel
+      {
+        if (fused) {  // the hand gradient pass and the reduced J'J kernel (double or float)
           const Lay L(i, h, m);
           host::pad_weights(net, theta, L.hs, L.me, Wp.data());
           for (Index b0 = lo; b0 < hi; b0 += B) {
@@ -404,18 +439,27 @@ class NormalEquations {
     }
   };
 
-  void assemble_gradient(const Slot& w, Vec& jte) const {
-    const Index ph = w.gH.size(), po = w.gO.size();
+  // J'e = [vec(gH); vec(gO)] (column-major) in the output's type.
+  template <class GH, class GO, class VOut>
+  static void assemble_gradient(const GH& gH, const GO& gO, VOut& jte) {
+    using O = typename VOut::Scalar;
+    const Index ph = gH.size(), po = gO.size();
     jte.resize(ph + po);
-    jte.head(ph) = Eigen::Map<const Vec>(w.gH.data(), ph);
-    jte.tail(po) = Eigen::Map<const Vec>(w.gO.data(), po);
+    for (Index c = 0; c < gH.cols(); ++c)
+      for (Index r = 0; r < gH.rows(); ++r) jte(c * gH.rows() + r) = static_cast<O>(gH(r, c));
+    for (Index c = 0; c < gO.cols(); ++c)
+      for (Index r = 0; r < gO.rows(); ++r)
+        jte(ph + c * gO.rows() + r) = static_cast<O>(gO(r, c));
   }
 
-  void assemble_jtj(const Scalar* theta, const Slot& w, Mat& jtj) const {
-    const Index h = net_.hidden(), m = net_.outputs(), ph = w.C.cols(), po = m * (h + 1);
+  // J'J from the summed S_, C_ and R_ (double) and the output weights, in the output's type.
+  template <class MOut>
+  void assemble_jtj(const Scalar* theta, MOut& jtj) const {
+    using O = typename MOut::Scalar;
+    const Index h = net_.hidden(), m = net_.outputs(), ph = C_.cols(), po = m * (h + 1);
     jtj.resize(ph + po, ph + po);
-    const auto W2 = net_.W2(theta);
-    const Mat Q = W2.transpose() * W2;  // h x h
+    const MatD W2 = net_.W2(theta).template cast<double>();
+    const MatD Q = W2.transpose() * W2;  // h x h
     // hidden-hidden: S's block (l, l') (l >= l') is symmetric, and only the lower triangle of
     // each block is read (jtj_reduced computes no more)
     const Index nz = ph / h;
@@ -424,7 +468,8 @@ class NormalEquations {
         const Index c = l2 * h + j2;
         for (Index l = l2; l < nz; ++l)
           for (Index j = l == l2 ? j2 : 0; j < h; ++j) {
-            const Scalar v = S_(l * h + std::max(j, j2), l2 * h + std::min(j, j2)) * Q(j, j2);
+            const O v = static_cast<O>(S_(l * h + std::max(j, j2), l2 * h + std::min(j, j2)) *
+                                       Q(j, j2));
             jtj(l * h + j, c) = v;
             jtj(c, l * h + j) = v;
           }
@@ -433,7 +478,7 @@ class NormalEquations {
     jtj.bottomRightCorner(po, po).setZero();
     for (Index j = 0; j <= h; ++j)
       for (Index j2 = 0; j2 <= h; ++j2) {
-        const Scalar v = j >= j2 ? w.R(j, j2) : w.R(j2, j);
+        const O v = static_cast<O>(j >= j2 ? R_(j, j2) : R_(j2, j));
         for (Index k = 0; k < m; ++k) jtj(ph + j * m + k, ph + j2 * m + k) = v;
       }
     // output-hidden and its transpose
@@ -441,7 +486,7 @@ class NormalEquations {
       const Index jh = c % h;
       for (Index j = 0; j <= h; ++j)
         for (Index k = 0; k < m; ++k) {
-          const Scalar v = W2(k, jh) * w.C(j, c);
+          const O v = static_cast<O>(W2(k, jh) * C_(j, c));
           jtj(ph + j * m + k, c) = v;
           jtj(c, ph + j * m + k) = v;
         }
@@ -453,7 +498,7 @@ class NormalEquations {
   int threads_;
   Slot total_;                    // the sums over the record (chunk 0, then each chunk added)
   std::vector<Scratch> scratch_;  // one per thread (at most kMaxChunks)
-  Mat S_;                         // the summed S (lower triangle), assembled into J'J
+  MatD S_, C_, R_;                // the summed S and R (lower triangles) and C, assembled into J'J
 };
 
 }  // namespace cdam

@@ -29,14 +29,23 @@ struct TrainHistory {
 using EpochCallback = std::function<bool(int, double)>;
 
 // The host policy of lm_train: J'e and J'J from NormalEquations (blocks, no J formed, `threads`
-// workers over fixed chunks, the same bits for any thread count), (J'J + mu I) d = J'e by
-// Eigen's LLT; an optional validation set. The constructor is the one place that allocates.
+// workers over fixed chunks, the same bits for any thread count), (J'J + mu I) d = J'e by the
+// blocked Cholesky of host/kernels.hpp (AVX2 + FMA) or Eigen's LLT; an optional validation set.
+// The constructor is the one place that allocates.
+// Precision: J'e, J'J, the Cholesky and the step are double whatever the Scalar. In float the
+// network, its products and the sums over each slice of 32 samples are float (the hand kernels
+// of host/kernels_f32.hpp), the record's sums double: J'J over 10,000 samples summed in float
+// would keep about 3 of its 7 digits, and J'J + mu I with mu down to 1e-20 relative needs more
+// than float's 7 digits to factor (float's Cholesky fails where double's holds); the step is
+// rounded to float when added to the float weights.
 template <typename Scalar_>
 class LmDynamic {
  public:
   using Scalar = Scalar_;
   using Mat = typename NormalEquations<Scalar>::Mat;
   using Vec = typename NormalEquations<Scalar>::Vec;
+  using MatD = typename NormalEquations<Scalar>::MatD;
+  using VecD = typename NormalEquations<Scalar>::VecD;
   using Map = typename NormalEquations<Scalar>::ConstMap;
 
   // X: i x N, T: m x N (column = sample); Xv, Tv: the validation set or null.
@@ -46,40 +55,42 @@ class LmDynamic {
         val_(Xv != nullptr && Tv != nullptr && Xv->cols() > 0),
         n_train_(static_cast<double>(X.cols() * T.rows())),
         n_val_(val_ ? static_cast<double>(Xv->cols() * Tv->rows()) : 1.0),
-        D_(net.num_params()), trial_(D_), best_(D_), jte_(D_), step_(D_), jtj_(D_, D_),
-        lhs_(D_, D_), llt_(D_) {}
+        D_(net.num_params()), trial_(D_), best_(D_), step_s_(D_), jte_(D_), step_(D_),
+        jtj_(D_, D_), lhs_(D_, D_), llt_(D_) {}
 
   Index dim() const { return D_; }
   double train_mse(const Scalar* theta) {
     return ne_.evaluate(theta, X_, T_, nullptr, nullptr) / n_train_;
   }
   double normal(const Scalar* theta, bool with_jtj) {
-    ne_.evaluate(theta, X_, T_, &jte_, with_jtj ? &jtj_ : nullptr);
-    return static_cast<double>(jte_.norm());
+    ne_.evaluate_d(theta, X_, T_, &jte_, with_jtj ? &jtj_ : nullptr);
+    return jte_.norm();
   }
   bool solve(double mu) {
     lhs_ = jtj_;
-    lhs_.diagonal().array() += static_cast<Scalar>(mu);
-    if constexpr (std::is_same<Scalar, double>::value) {
-      // AVX2 + FMA (chosen at run time): the blocked Cholesky of host/kernels.hpp, about twice
-      // Eigen's LLT compiled for SSE2 (308 x 308: 0.36 against 0.74 ms); Eigen's otherwise.
-      if (host::avx2_path(host::KernelPath::Auto)) {
-        if (!host::cholesky_lower(lhs_.data(), D_, D_)) return false;
-        step_ = jte_;
-        host::cholesky_solve(lhs_.data(), D_, D_, step_.data());
-        return true;
-      }
+    lhs_.diagonal().array() += mu;
+    // AVX2 + FMA (chosen at run time): the blocked Cholesky of host/kernels.hpp, about twice
+    // Eigen's LLT compiled for SSE2 (308 x 308: 0.36 against 0.74 ms); Eigen's otherwise.
+    if (host::avx2_path(host::KernelPath::Auto)) {
+      if (!host::cholesky_lower(lhs_.data(), D_, D_)) return false;
+      step_ = jte_;
+      host::cholesky_solve(lhs_.data(), D_, D_, step_.data());
+    } else {
+      llt_.compute(lhs_);
+      if (llt_.info() != Eigen::Success) return false;
+      step_ = llt_.solve(jte_);
     }
-    llt_.compute(lhs_);
-    if (llt_.info() != Eigen::Success) return false;
-    step_ = llt_.solve(jte_);
+    if constexpr (!std::is_same<Scalar, double>::value) step_s_ = step_.template cast<Scalar>();
     return true;
   }
   bool validation() const { return val_; }
   double val_mse(const Scalar* theta) {
     return ne_.evaluate(theta, *Xv_, *Tv_, nullptr, nullptr) / n_val_;
   }
-  Scalar* step() { return step_.data(); }
+  Scalar* step() {
+    if constexpr (std::is_same<Scalar, double>::value) return step_.data();
+    else return step_s_.data();
+  }
   Scalar* trial() { return trial_.data(); }
   Scalar* best() { return best_.data(); }
 
@@ -92,9 +103,10 @@ class LmDynamic {
   bool val_;
   double n_train_, n_val_;
   Index D_;
-  Vec trial_, best_, jte_, step_;
-  Mat jtj_, lhs_;  // D x D
-  Eigen::LLT<Mat> llt_;
+  Vec trial_, best_, step_s_;  // step_s_: the step in Scalar (float)
+  VecD jte_, step_;
+  MatD jtj_, lhs_;  // D x D
+  Eigen::LLT<MatD> llt_;
 };
 
 // Levenberg-Marquardt (trainlm semantics, levenberg_marquardt.hpp) on the host: theta_io (D
