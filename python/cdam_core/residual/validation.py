@@ -199,7 +199,8 @@ class BlockedCV:
         model could not be fitted or simulated) and the reason if any failed. ``estimator``
         "oe": each fold's IDIM estimate refined by output error on the fold's training windows
         (:mod:`cdam_core.residual.output_error`); "iv": IDIM-IV on the fold's rows
-        (:mod:`cdam_core.residual.instrumental`); both simulation criterion only. ``fit_state``
+        (:mod:`cdam_core.residual.instrumental`); "iv-oe": output error started from the
+        fold's IDIM-IV estimate (DIDIM-style); all simulation criterion only. ``fit_state``
         False: windows start from the measured state as it is (the criterion's rule)."""
         model = self.model if model is None else model
         effects = tuple(effects)
@@ -221,10 +222,11 @@ class BlockedCV:
                     continue
                 g = greybox_of(f, self.dt)
                 starts = starts[starts >= g.t0 - 1]
-                if estimator == "iv":
-                    f, _ = iv_fit(f, self.sig, U, self.horizon, self.trim, rows=mask)
+                if estimator in ("iv", "iv-oe"):
+                    f, _ = iv_fit(f, self.sig, U, self.horizon, self.trim, rows=mask,
+                                  integrator=self.integrator)
                     g = greybox_of(f, self.dt)
-                elif estimator == "oe":
+                if estimator in ("oe", "iv-oe"):
                     self.refine(g, f, U, mask)
                 out.append(self._shooting(g, U[a:b], self.Y[a:b], starts, fit_state))
             except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
@@ -250,16 +252,21 @@ class BlockedCV:
         _, info = refine(g, U, self.Y, self.training_starts(mask), self._shooting, bounds)
         return info
 
-    def _shooting(self, g, U, Y, starts, fit_state: bool = True, thetas=None) -> np.ndarray:
+    def _shooting(self, g, U, Y, starts, fit_state: bool = True, thetas=None,
+                  samples: bool = False) -> np.ndarray:
         """Per-window normalised squared error, each window's initial state fitted (linearised
         least squares, one batched simulation with every state component perturbed).
         ``thetas``: (G, parameters) values (``GreyBox.windows``): the G parameter sets are
-        simulated in the same batch and a (G, windows) array is returned."""
+        simulated in the same batch and a (G, windows) array is returned. ``samples``: each
+        window's normalised residual after the state fit instead, (windows, H * outputs) (or
+        (G, windows, H * outputs)), whose mean square is the window's error."""
         H, m, W = self.horizon, Y.shape[1], starts.size
         G = 1 if thetas is None else int(np.shape(thetas)[0])
         x0 = Y[starts].astype(float)
         v0 = (Y[starts] - Y[starts - 1]) / self.dt
         idx = starts[None, :] + np.arange(1, H + 1)[:, None]
+        if samples and not fit_state:
+            raise ValueError("samples: the residuals are those after the state fit")
         if not fit_state:
             P = g.windows(U, Y, np.tile(starts, G), H, np.tile(x0, (G, 1)),
                           np.tile(v0, (G, 1)), integrator=self.integrator,
@@ -274,7 +281,7 @@ class BlockedCV:
         P = g.windows(U, Y, np.tile(starts, G * (2 * m + 1)), H, X0, V0,
                       integrator=self.integrator, thetas=thetas).reshape(H, G, 2 * m + 1, W, m)
         scale = 1.0 / np.sqrt(self.norm)
-        out = np.empty((G, W))
+        out = np.empty((G, W, H * m)) if samples else np.empty((G, W))
         for j in range(G):
             r = (Y[idx] - P[:, j, 0]) * scale                                  # (H, W, m)
             S = (P[:, j, 1:] - P[:, j, :1]) * scale / steps[None, :, None, None]  # (H, 2m, W, m)
@@ -283,7 +290,7 @@ class BlockedCV:
             # least squares per window, batched (numpy.linalg.lstsq's default singular-value
             # cut)
             res = b - A @ (np.linalg.pinv(A, rcond=np.finfo(float).eps * max(A.shape[1:])) @ b)
-            out[j] = np.sum(res[..., 0] ** 2, axis=1) / (H * m)
+            out[j] = res[..., 0] if samples else np.sum(res[..., 0] ** 2, axis=1) / (H * m)
         return out if thetas is not None else out[0]
 
     def compare(self, simple, rich, tested: int, alpha: float) -> Comparison:
