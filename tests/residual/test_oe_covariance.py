@@ -49,9 +49,10 @@ def test_sandwich_matches_the_spread_of_the_estimate():
         assert samples
         return np.stack([y - X @ th for th in np.atleast_2d(thetas)])    # (G, W, N)
     scale = np.abs(est)
-    sd = window_covariance(_Params(est), None, None, np.arange(W), shooting, ["a", "b"],
-                           est / scale, scale, np.full(2, -np.inf), np.full(2, np.inf))
-    got = np.array([sd["a"], sd["b"]])
+    sd, _, n = window_covariance(_Params(est), None, None, np.arange(W), shooting, ["a", "b"],
+                                 est / scale, scale, np.full(2, -np.inf), np.full(2, np.inf))
+    got = sd * scale
+    assert n == N
     np.testing.assert_allclose(got, spread, rtol=0.25)
     r = y.ravel() - A @ est                       # the independent-samples formula
     naive = np.sqrt(np.diag(r @ r / (r.size - 2) * np.linalg.inv(A.T @ A)))

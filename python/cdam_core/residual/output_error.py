@@ -47,6 +47,7 @@ from cdam_core.models.greybox.estimation import apply_fit
 __all__ = ["refine", "refined_fit"]
 
 MAX_EVALUATIONS = 80   # a cap, not a tuning: the stop is the tenth-of-a-sigma rule (above)
+MAX_RESTARTS = 3       # continuations after the sandwich's sigma is known (a cap)
 DIFF_STEP = 1e-4   # relative step of the forward differences (scipy's diff_step)
 
 
@@ -63,13 +64,19 @@ def refine(g, U, Y, starts, shooting, bounds: dict) -> tuple[dict, dict]:
     x0 = np.clip(th0 / scale, np.where(np.isfinite(lo), lo + gap, -np.inf),
                  np.where(np.isfinite(hi), hi - gap, np.inf))
 
+    n_res = {}
+
     def residual(x, starts=starts):
+        """Every window's residual samples after its state fit, over sqrt(samples per
+        window): the cost is half the sum of the windows' mean squared errors."""
         g.set_parameters(dict(zip(names, x * scale)))
         try:
-            e = shooting(g, U, Y, starts)
+            e = np.asarray(shooting(g, U, Y, starts, samples=True), dtype=float)
         except ValueError:                  # a diverging trial point: a large, finite error
-            return np.full(starts.size, 1e3)
-        return np.sqrt(np.maximum(e, 0.0))
+            return np.full(n_res[starts.size], 1e3)
+        e = e.reshape(starts.size, -1)
+        n_res[starts.size] = e.size
+        return e.ravel() / np.sqrt(e.shape[1])
 
     full = list(g.theta_)
     cols = [full.index(p) for p in names]
@@ -86,7 +93,8 @@ def refine(g, U, Y, starts, shooting, bounds: dict) -> tuple[dict, dict]:
             TH[j + 1, cols] = x * scale
             TH[j + 1, cols[j]] = (x[j] + h[j]) * scale[j]
         try:
-            E = np.sqrt(np.maximum(shooting(g, U, Y, starts, thetas=TH), 0.0))
+            E = np.asarray(shooting(g, U, Y, starts, thetas=TH, samples=True), dtype=float)
+            E = E.reshape(len(names) + 1, -1) / np.sqrt(E.size / ((len(names) + 1) * starts.size))
             f0, F = E[0], E[1:]
         except ValueError:
             f0 = residual(x, starts)
@@ -95,81 +103,64 @@ def refine(g, U, Y, starts, shooting, bounds: dict) -> tuple[dict, dict]:
         return ((F - f0[None, :]) / h[:, None]).T
 
     r0 = residual(x0)
-    ftol = 0.01 / max(starts.size - len(names), 1)
+    W = starts.size
+    ftol = 0.01 / max(r0.size - len(names), 1)
     sol = least_squares(residual, x0, jac=jacobian, bounds=(lo, hi), max_nfev=MAX_EVALUATIONS,
                         ftol=ftol)
-    theta = dict(zip(names, map(float, sol.x * scale)))
-    # TEMPORARY diagnostic: delete-a-block jackknife over 5 contiguous blocks of windows
-    jk = []
-    for blk in np.array_split(np.arange(starts.size), 5):
-        keep = np.setdiff1d(np.arange(starts.size), blk)
-        sk = starts[keep]
+    evaluations = int(sol.nfev)
+    sd = A = None
+    for _ in range(MAX_RESTARTS + 1):      # stop at a tenth of the sandwich's sigma (above)
         try:
-            solk = least_squares(lambda x: residual(x, sk), sol.x,
-                                 jac=lambda x: jacobian(x, sk), bounds=(lo, hi),
-                                 max_nfev=MAX_EVALUATIONS, ftol=ftol)
-            jk.append(solk.x)
-        except ValueError:
-            pass
-    if len(jk) == 5:
-        jk = np.array(jk)
-        _LAST["jack"] = {p: float(np.sqrt(0.8 * np.sum((jk[:, j] - jk[:, j].mean()) ** 2))
-                                  * scale[j]) for j, p in enumerate(names)}
+            sd, A, n = window_covariance(g, U, Y, starts, shooting, names, sol.x, scale, lo, hi)
+        except (ValueError, np.linalg.LinAlgError):
+            sd = None
+            break
+        F = 0.5 * float(sol.fun @ sol.fun)
+        # a move of a tenth of sigma_j along the valley (the others following) changes F by
+        # 0.005 sigma_j^2 / (A^-1)_jj / n: the smallest such change, as a share of F
+        need = 0.005 * float(np.min(sd ** 2 / np.diag(np.linalg.pinv(A)))) / n / max(F, 1e-300)
+        if not np.isfinite(need) or need >= ftol or evaluations >= MAX_EVALUATIONS:
+            break
+        ftol = max(need, 1e-15)
+        sol = least_squares(residual, sol.x, jac=jacobian, bounds=(lo, hi),
+                            max_nfev=MAX_EVALUATIONS - evaluations, ftol=ftol)
+        evaluations += int(sol.nfev)
+    theta = dict(zip(names, map(float, sol.x * scale)))
     g.set_parameters(theta)
-    g.set_parameters(theta)
-    try:
-        std = window_covariance(g, U, Y, starts, shooting, names, sol.x, scale, lo, hi)
-    except (ValueError, np.linalg.LinAlgError):
-        std = {p: float("nan") for p in names}
-    g.set_parameters(theta)
-    # the session-7 figure, for comparison: s^2 (J'J)^-1 on the windows' root mean squares
-    s2 = float(sol.fun @ sol.fun) / max(sol.fun.size - len(names), 1)
-    d = np.diag(np.linalg.pinv(sol.jac.T @ sol.jac)) * s2
-    naive = {p: float(np.sqrt(d[j]) * scale[j]) if d[j] > 0 else float("nan")
-             for j, p in enumerate(names)}
-    return theta, {"window_rms_before": float(np.sqrt(np.mean(r0 ** 2))),
-                   "window_rms_after": float(np.sqrt(np.mean(sol.fun ** 2))),
-                   "evaluations": int(sol.nfev), "status": sol.message, "std": std,
-                   "std_method": "cluster-robust sandwich, windows as clusters",
-                   "std_windows_rms": naive, "std_hac": dict(_LAST.get("hac", {})),
-                   "std_neff": dict(_LAST.get("neff_std", {})), "tau": _LAST.get("tau"),
-                   "std_jack": dict(_LAST.pop("jack", {}))}
+    std = {p: float(sd[j] * scale[j]) if sd is not None and np.isfinite(sd[j]) and sd[j] > 0
+           else float("nan") for j, p in enumerate(names)}
+    return theta, {"window_rms_before": float(np.sqrt(r0 @ r0 / W)),
+                   "window_rms_after": float(np.sqrt(sol.fun @ sol.fun / W)),
+                   "evaluations": evaluations, "status": sol.message, "std": std,
+                   "std_method": "cluster-robust sandwich, windows as clusters"}
 
 
-def window_covariance(g, U, Y, starts, shooting, names, x, scale, lo, hi) -> dict:
-    """Standard deviations of the parameters ``names`` at the scaled optimum ``x`` (module
-    doc): the windows' residuals after the state fit and their sensitivities, the
-    cluster-robust sandwich over windows. Two passes: forward differences at the optimiser's
-    steps, then central differences over one standard deviation of that first pass (at
-    least the optimiser's step, at most a tenth of the value, inside the bounds): a plain
-    sign's switching instants move with the parameters, so differences over 1e-4 of a value
-    see the jumps of single switches (measured on a link-PD record with dry friction: the
-    stiffness' sigma 0.0003 % against an error of 0.17 %); the spread that matters is that
-    of the estimate, so the sensitivities are taken over its scale."""
+def window_covariance(g, U, Y, starts, shooting, names, x, scale, lo, hi) -> tuple:
+    """Standard deviations (scaled coordinates) of the parameters ``names`` at the scaled
+    optimum ``x`` (module doc), the Gauss-Newton matrix A and the samples per window: the
+    windows' residuals after the state fit and their sensitivities, the cluster-robust
+    sandwich over windows. Two passes: forward differences at the optimiser's steps, then
+    central differences over one standard deviation of that first pass (at least the
+    optimiser's step, at most a tenth of the value, inside the bounds): a plain sign's
+    switching instants move with the parameters, so differences over 1e-4 of a value see the
+    jumps of single switches (measured on a link-PD record with dry friction: the stiffness'
+    sigma 0.0003 % against an error of 0.17 %); the spread that matters is that of the
+    estimate, so the sensitivities are taken over its scale."""
     h = _steps(x, lo, hi)
-    sd = _sandwich(g, U, Y, starts, shooting, names, x, scale, h, central=False)
+    sd, A, n = _sandwich(g, U, Y, starts, shooting, names, x, scale, h, central=False)
     room = np.minimum(x - lo, hi - x)
     wide = np.clip(sd, np.abs(h), 0.1 * np.maximum(np.abs(x), np.abs(h)))
     wide = np.where(np.isfinite(wide), np.minimum(wide, 0.999 * room), np.abs(h))
     if np.all(wide > 0):
-        sd = _sandwich(g, U, Y, starts, shooting, names, x, scale, wide, central=True)
-        W = np.size(starts)
-        hac = _sandwich(g, U, Y, starts, shooting, names, x, scale, wide, central=True,
-                        lags=int(4 * (W / 100.0) ** (2.0 / 9.0)))
-        _LAST["hac"] = {p: float(hac[j] * scale[j]) for j, p in enumerate(names)}
-        _LAST["neff_std"] = {p: float(_LAST["neff"][j] * scale[j]) for j, p in enumerate(names)}
-    return {p: float(sd[j] * scale[j]) if np.isfinite(sd[j]) and sd[j] > 0 else float("nan")
-            for j, p in enumerate(names)}
+        sd, A, n = _sandwich(g, U, Y, starts, shooting, names, x, scale, wide, central=True)
+    return sd, A, n
 
 
-_LAST: dict = {}   # TEMPORARY diagnostic (coverage campaign)
-
-
-def _sandwich(g, U, Y, starts, shooting, names, x, scale, h, central: bool,
-              lags: int = 0) -> np.ndarray:
-    """sqrt(diag(A^-1 B A^-1 W / (W - p))) in the scaled coordinates (module doc), the
-    sensitivities by forward (``central`` False) or central differences of steps ``h``, every
-    perturbed parameter set a group of one batched simulation."""
+def _sandwich(g, U, Y, starts, shooting, names, x, scale, h, central: bool) -> tuple:
+    """(sqrt(diag(A^-1 B A^-1 W / (W - p))), A, samples per window) in the scaled
+    coordinates (module doc), the sensitivities by forward (``central`` False) or central
+    differences of steps ``h``, every perturbed parameter set a group of one batched
+    simulation."""
     full = list(g.theta_)
     cols = [full.index(p) for p in names]
     P = len(names)
@@ -190,22 +181,8 @@ def _sandwich(g, U, Y, starts, shooting, names, x, scale, h, central: bool,
     score = np.einsum("wnp,wn->wp", J, e)
     W = score.shape[0]
     Ai = np.linalg.pinv(A)
-    meat = score.T @ score
-    if lags:        # Newey-West: neighbouring windows' scores correlated up to ``lags``
-        for l in range(1, lags + 1):
-            c = score[l:].T @ score[:-l]
-            meat = meat + (1.0 - l / (lags + 1.0)) * (c + c.T)
-    cov = Ai @ meat @ Ai * (W / max(W - P, 1))
-    if central and not lags:   # TEMPORARY diagnostic: s^2 tau (J'J)^-1, tau from the residual
-        n = e.shape[1]
-        ac = np.array([np.mean(e[:, k:] * e[:, :n - k]) for k in range(n)])
-        rho = ac / ac[0] if ac[0] > 0 else np.zeros(n)
-        neg = np.flatnonzero(rho <= 0)
-        tau = 1.0 + 2.0 * float(np.sum(rho[1:neg[0] if neg.size else n]))
-        s2 = float(np.sum(e ** 2)) / max(e.size - P, 1)
-        _LAST["neff"] = np.sqrt(np.maximum(np.diag(Ai) * s2 * tau, 0.0))
-        _LAST["tau"] = tau
-    return np.sqrt(np.maximum(np.diag(cov), 0.0))
+    cov = Ai @ (score.T @ score) @ Ai * (W / max(W - P, 1))
+    return np.sqrt(np.maximum(np.diag(cov), 0.0)), A, e.shape[1]
 
 
 def _steps(x, lo, hi, rel: float = DIFF_STEP) -> np.ndarray:
