@@ -6,30 +6,35 @@ simulated windows (the held-out validation's windows: ``H`` samples from the mea
 each window's initial state projected out by least squares) over the estimated parameters with
 ``scipy.optimize.least_squares`` (trust-region reflective, the model's physical bounds,
 a forward-difference Jacobian with scipy's steps whose columns are simulated in one batch:
-every perturbed parameter set is a group of lanes of one rollout, ``GreyBox.windows``).
+every perturbed parameter set is a group of lanes of one rollout, ``GreyBox.windows``). The
+residuals are every window's samples after its state fit (over sqrt(samples per window), so
+the cost is half the sum of the windows' mean squared errors). Session 7 gave least squares
+one residual per window, its root mean square: at an optimum where the windows hold noise
+that residual is flat in the parameters (sqrt(s^2 + quadratic)), Gauss-Newton's J'J misses
+the curvature, and the fit crawled and stopped early (generator B, seed 1: Kd +1.96 %, Dm
++0.71 % after 35 evaluations; on the samples: Kd -0.21 %, Dm +0.11 % after 3).
 
-Standard deviations: the cost is the sum over windows and samples of the squared residual
-e (after each window's state fit), so at the optimum theta the estimate solves
-sum_w J_w' e_w = 0 (J_w: the window's residual sensitivities, forward differences at the
-optimum, one batched simulation). Its covariance is the sandwich A^-1 B A^-1 with
-A = sum_w J_w' J_w (Gauss-Newton) and B = sum_w (J_w' e_w)(J_w' e_w)', the windows as
-clusters (cluster-robust), times W / (W - p) (W windows, p parameters). Why clusters: a
-window's residuals are correlated (the state fit absorbs part of the noise, quantisation and
-the filtered start are coloured, an unmodelled term drifts over a window), which the textbook
-s^2 (J'J)^-1 takes as independent samples; the windows themselves do not overlap and span at
-least the motion's correlation time, so they are treated as independent of one another. The
-sandwich needs no noise model and no variance estimate (it is the empirical spread of the
-windows' scores). Before (session 7): sqrt(diag(s^2 (J'J)^-1)) on the per-window root mean
-squares, whose Jacobian vanishes at an optimum where the windows hold only noise (r_w =
-sqrt(s^2 + quadratic) is flat there): sigmas 30-40 % where the errors were < 1.3 %.
-Measured on the independent generator (tests/residual/joint_generator.py, nine conditions x
-seeds): see :func:`window_covariance`'s caller in the README's joint example and the report.
+Standard deviations: at the optimum the estimate solves sum_w J_w' e_w = 0 (e_w: window w's
+residual samples, J_w their sensitivities, differences at the optimum in one batched
+simulation). Its covariance is the sandwich A^-1 B A^-1 with A = sum_w J_w' J_w
+(Gauss-Newton) and B = sum_w (J_w' e_w)(J_w' e_w)', the windows as clusters
+(cluster-robust), times W / (W - p) (W windows, p parameters). Why clusters: a window's
+residuals are correlated (the state fit absorbs part of the noise, quantisation and the
+filtered start are coloured, an unmodelled term drifts over a window), which the textbook
+s^2 (J'J)^-1 takes as independent samples; the windows do not overlap and span at least the
+motion's correlation time, so they are taken as independent of one another. The sandwich
+needs no noise model (it is the empirical spread of the windows' scores). Session 7's
+s^2 (J'J)^-1 on the per-window root mean squares had the flat Jacobian above in it: sigmas
+of 30-40 % where the errors were < 1.3 %. Coverage on the independent generator: see the
+report of [greybox] 19 (session 8) and tests/residual/test_oe_covariance.py.
 
 When to stop: a move of a tenth of a standard deviation changes the cost (half the sum of
-squared window errors, F = dof s^2 / 2 at the optimum) by about 0.005 s^2, a share 0.01 / dof
-of F; smaller improvements are statistically nothing, so that share is scipy's ``ftol`` (dof:
-windows minus parameters). The default 1e-8 spent most of the evaluations on such moves
-(generator B, a fold: 80 evaluations, the cost 0.3 % lower after evaluation 35).
+squared residuals, F = dof s^2 / 2 at the optimum for independent residuals) by about
+0.005 s^2, a share 0.01 / dof of F; smaller improvements are statistically nothing, so that
+share is scipy's ``ftol`` (dof: residual samples minus parameters). Then the sandwich's
+sigma is formed and, where a tenth of it along the valley (the other parameters following:
+0.005 sigma_j^2 / (A^-1)_jj) is a smaller share of F than that ``ftol``, the fit continues
+with the smaller share (at most ``MAX_RESTARTS`` times, within ``MAX_EVALUATIONS``).
 
 Which estimate the final model keeps is decided on held-out data like everything else: the
 refinement is run on four blocks and scored on the fifth (``BlockedCV`` with
