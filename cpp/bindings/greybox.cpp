@@ -2,7 +2,11 @@
 // accelerations arrive as a tape of operations recorded from its numpy equations
 // (models/greybox/trace.py); this file evaluates the tape for every lane (window or parameter
 // perturbation), sample, substep and stage: semi-implicit Euler (the model kind's integrator,
-// as on the firmware) or classical Runge-Kutta 4 with the inputs held over the sample.
+// as on the firmware) or classical Runge-Kutta 4 with the inputs held over the sample and the
+// switching terms (sign and comparisons) evaluated once per step, at the step's start state,
+// and held over its four stages (the zero-order hold of a switching term, as a firmware step
+// takes it): RK4's stages would otherwise see -Fc, +Fc, -Fc, +Fc where the motion sticks and
+// their weights 1, 2, 2, 1 cancel the dry friction.
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 
@@ -41,14 +45,24 @@ struct Tape {
 
 constexpr int kChunk = 32;   // lanes evaluated together (inner loops over lanes)
 
+bool switching(int op) { return op == kSign || op == kGt || op == kLt || op == kGe || op == kLe; }
+
+enum Hold : int { kFree, kRecord, kReplay };
+
 // Accelerations of a chunk of B lanes at (x, v) (structure of arrays: x[i * kChunk + l]).
 // reg holds nodes x kChunk values; srow[l] the series row of lane l, th[l] its parameters and
-// inv[l] its inertia inverse (n x n, row-major).
+// inv[l] its inertia inverse (n x n, row-major). hold: kRecord copies the switching nodes'
+// values into held (nodes x kChunk), kReplay takes them from there instead of evaluating.
 void accel(const Tape& tp, int B, const double* x, const double* v, const double* const* srow,
            const double* t, const double* const* th, const double* const* inv, double* reg,
-           double* acc) {
+           double* acc, Hold hold = kFree, double* held = nullptr) {
   for (int i = 0; i < tp.nodes; ++i) {
     double* y = reg + static_cast<std::size_t>(i) * kChunk;
+    double* hy = held ? held + static_cast<std::size_t>(i) * kChunk : nullptr;
+    if (hold == kReplay && switching(tp.op[i])) {
+      for (int l = 0; l < B; ++l) y[l] = hy[l];
+      continue;
+    }
     const double* ra = tp.a[i] >= 0 ? reg + static_cast<std::size_t>(tp.a[i]) * kChunk : nullptr;
     const double* rb = tp.b[i] >= 0 ? reg + static_cast<std::size_t>(tp.b[i]) * kChunk : nullptr;
     const int ci = static_cast<int>(tp.c[i]);
@@ -80,6 +94,8 @@ void accel(const Tape& tp, int B, const double* x, const double* v, const double
       case kSqrt: for (int l = 0; l < B; ++l) y[l] = std::sqrt(ra[l]); break;
       default: for (int l = 0; l < B; ++l) y[l] = NAN;
     }
+    if (hold == kRecord && switching(tp.op[i]))
+      for (int l = 0; l < B; ++l) hy[l] = y[l];
   }
   const int n = tp.n;
   for (int i = 0; i < n; ++i)
@@ -164,7 +180,8 @@ void register_greybox(py::module_& m) {
         const double h = dt / static_cast<double>(substeps);
         long long diverged = -1, limit = steps;   // the first step at which a lane diverged
         const std::size_t cn = static_cast<std::size_t>(n) * kChunk;
-        std::vector<double> reg(static_cast<std::size_t>(nodes) * kChunk);
+        std::vector<double> reg(static_cast<std::size_t>(nodes) * kChunk),
+            held(rk4 ? static_cast<std::size_t>(nodes) * kChunk : 0);
         std::vector<double> x(cn), v(cn), xs(cn), vs(cn), k1(cn), k2(cn), k3(cn), k4(cn), l2(cn),
             l3(cn), tt(kChunk);
         std::vector<const double*> srow(kChunk), th(kChunk), inv(kChunk);
@@ -196,29 +213,30 @@ void register_greybox(py::module_& m) {
                   }
                 continue;
               }
-              // RK4 on (x, v)' = (v, a(x, v)), the inputs held over the sample
+              // RK4 on (x, v)' = (v, a(x, v)), the inputs held over the sample, the switching
+              // terms at the step's start state
               accel(tp, B, x.data(), v.data(), srow.data(), tt.data(), th.data(), inv.data(),
-                    reg.data(), k1.data());
+                    reg.data(), k1.data(), kRecord, held.data());
               for (std::size_t q = 0; q < cn; ++q) {
                 xs[q] = x[q] + 0.5 * h * v[q];
                 vs[q] = v[q] + 0.5 * h * k1[q];
               }
               l2 = vs;
               accel(tp, B, xs.data(), vs.data(), srow.data(), tt.data(), th.data(), inv.data(),
-                    reg.data(), k2.data());
+                    reg.data(), k2.data(), kReplay, held.data());
               for (std::size_t q = 0; q < cn; ++q) {
                 xs[q] = x[q] + 0.5 * h * l2[q];
                 vs[q] = v[q] + 0.5 * h * k2[q];
               }
               l3 = vs;
               accel(tp, B, xs.data(), vs.data(), srow.data(), tt.data(), th.data(), inv.data(),
-                    reg.data(), k3.data());
+                    reg.data(), k3.data(), kReplay, held.data());
               for (std::size_t q = 0; q < cn; ++q) {
                 xs[q] = x[q] + h * l3[q];
                 vs[q] = v[q] + h * k3[q];
               }
               accel(tp, B, xs.data(), vs.data(), srow.data(), tt.data(), th.data(), inv.data(),
-                    reg.data(), k4.data());
+                    reg.data(), k4.data(), kReplay, held.data());
               for (std::size_t q = 0; q < cn; ++q) {
                 x[q] = x[q] + h / 6.0 * (v[q] + 2.0 * l2[q] + 2.0 * l3[q] + vs[q]);
                 v[q] = v[q] + h / 6.0 * (k1[q] + 2.0 * k2[q] + 2.0 * k3[q] + k4[q]);
@@ -242,7 +260,8 @@ void register_greybox(py::module_& m) {
       py::arg("series"), py::arg("theta"), py::arg("inverse"), py::arg("x0"), py::arg("v0"),
       py::arg("starts"), py::arg("steps"), py::arg("substeps"), py::arg("rk4"), py::arg("dt"),
       py::arg("t_start"), py::arg("path"),
-      "Integrate a grey-box model given as a tape (models/greybox/trace.py) over every lane; "
+      "Integrate a grey-box model given as a tape (models/greybox/trace.py) over every lane "
+      "(rk4: the switching nodes, sign and comparisons, held over each step's stages); "
       "returns (positions, diverged row or -1): (steps, lanes, positions) with path, else "
       "(lanes, positions).");
 }

@@ -1,7 +1,9 @@
 """The grey-box rollout: the traced tape against the numpy equations (a tape interpreter written
-here), the compiled rollout against the numpy one (semi-implicit Euler and RK4), RK4 against
-the closed-form solution of a linear axis under a held input, batched parameter groups against
-separate runs, and the output-error Jacobian against scipy's finite differences."""
+here), the compiled rollout against the numpy one (semi-implicit Euler and RK4) and against an
+RK4 written here on that interpreter (switching terms held over each step's stages), RK4
+against the closed-form solution of a linear axis under a held input and of an axis that dry
+friction stops, batched parameter groups against separate runs, and the output-error Jacobian
+against scipy's finite differences."""
 import sys
 from pathlib import Path
 
@@ -17,8 +19,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "residual"))
 from joint_generator import Joint, rigid_axis  # noqa: E402
 
 
-def _interpret(tape, outs, x, v, srow, t, th):
-    """A plain numpy interpreter of the tape (independent of the C++ one)."""
+SWITCHING_OPS = ("sign", "gt", "lt", "ge", "le")
+
+
+def _interpret(tape, outs, x, v, srow, t, th, hold=None, replay=False):
+    """A plain numpy interpreter of the tape (independent of the C++ one). ``hold``: a dict
+    that receives the switching nodes' values, or with ``replay`` gives them."""
     op, a, b, c = tape.arrays()
     fns = {"add": np.add, "sub": np.subtract, "mul": np.multiply, "div": np.divide,
            "neg": np.negative, "sign": np.sign, "tanh": np.tanh, "sin": np.sin, "cos": np.cos,
@@ -36,11 +42,15 @@ def _interpret(tape, outs, x, v, srow, t, th):
             val = {"X": x, "V": v, "S": srow, "P": th}[name][:, j]
         elif name == "T":
             val = t
+        elif replay and name in SWITCHING_OPS:
+            val = hold[i]
         elif b[i] >= 0:
             val = fns[name](reg[a[i]], reg[b[i]])
         else:
             val = fns[name](reg[a[i]])
         reg.append(np.asarray(val, dtype=float) * np.ones(W))
+        if hold is not None and not replay and name in SWITCHING_OPS:
+            hold[i] = reg[-1]
     return np.array([reg[o] for o in outs])
 
 
@@ -171,11 +181,13 @@ def test_output_error_jacobian_equals_scipy_differences(axis):
     g = GreyBox.from_dict(g.to_dict())
     starts = np.arange(20, Y.shape[0] - 80, 60)
 
-    def shooting(g, U, Y, starts, thetas=None):
+    def shooting(g, U, Y, starts, thetas=None, samples=False):
         P = g.windows(U, Y, np.tile(starts, 1 if thetas is None else len(thetas)), 50,
                       thetas=thetas).reshape(50, -1, starts.size)
-        e = np.mean((P - Y[starts[None, :] + np.arange(1, 51)[:, None], 0][:, None]) ** 2,
-                    axis=0)
+        r = P - Y[starts[None, :] + np.arange(1, 51)[:, None], 0][:, None]
+        if samples:
+            return np.transpose(r, (1, 2, 0))
+        e = np.mean(r ** 2, axis=0)
         return e if thetas is not None else e[0]
     seen = {}
 
@@ -215,3 +227,97 @@ def test_validation_windows_by_rk4_score_the_true_structure_lower():
     assert scores["rk4"] < 0.9 * scores["euler"], scores
     with pytest.raises(ValueError, match="integrator"):
         BlockedCV(m, sig, 50, integrator="rk45")
+
+
+def _rk4_held_here(g, U, Y, starts, steps):
+    """RK4 windows on this file's tape interpreter: the inputs held over the sample, the
+    switching nodes evaluated at each step's start state and held over its four stages."""
+    u_all, ex_all = g._inputs(U)
+    tape, outs = g._trace(u_all, ex_all, {})
+    series = np.column_stack(list(u_all.values()) + list(ex_all.values()))
+    th = np.tile([g.theta_[p] for p in g.theta_], (starts.size, 1))
+    inv = g.inertia
+    dt = float(g.dt)
+    h = dt / g.substeps_
+    x, v = Y[starts].astype(float), (Y[starts] - Y[starts - 1]) / dt
+    out = np.empty((steps,) + x.shape)
+    for j in range(steps):
+        k = starts + j
+        for _ in range(g.substeps_):
+            hold = {}
+
+            def acc(x, v, replay):
+                return (inv @ _interpret(tape, outs, x, v, series[k], k * dt, th, hold,
+                                         replay)).T
+            a1 = acc(x, v, False)
+            x2, v2 = x + 0.5 * h * v, v + 0.5 * h * a1
+            a2 = acc(x2, v2, True)
+            x3, v3 = x + 0.5 * h * v2, v + 0.5 * h * a2
+            a3 = acc(x3, v3, True)
+            x4, v4 = x + h * v3, v + h * a3
+            a4 = acc(x4, v4, True)
+            x = x + h / 6.0 * (v + 2.0 * v2 + 2.0 * v3 + v4)
+            v = v + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
+        out[j] = x
+    return out
+
+
+@pytest.mark.parametrize("case", ["axis", "joint"])
+def test_rk4_switching_terms_held_as_written_here(case, request):
+    """The compiled RK4 windows (and the package's numpy path) against an RK4 written here on
+    the test's own tape interpreter, the switching nodes held from each step's first stage.
+    Both fixtures hold a plain sign (Coulomb friction) and the axis a direction test
+    (asymmetric friction, v > 0)."""
+    g, U, Y = request.getfixturevalue(case)
+    assert any(tr.OPS[o] in SWITCHING_OPS for o in g._trace(*g._inputs(U), {})[0].arrays()[0])
+    starts = np.arange(10, Y.shape[0] - 60, 211)
+    want = _rk4_held_here(g, U, Y, starts, 40)
+    got = g.windows(U, Y, starts, 40, integrator="rk4")
+    np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-12)
+
+
+def test_rk4_dry_friction_held_over_the_step_closed_form():
+    """M v' = u_k - Fv v - Fc s_k over each sample, u_k held and s_k = sign(v_k) taken at the
+    sample's start (the zero-order hold of the switching term): exact per-sample solution
+    (closed form). The input (1.5 sin 2 pi t against Fc 1) lets the axis move and stick in
+    turn. RK4 windows (one substep) follow it to 1e-9 of the motion; with the sign evaluated at
+    every stage they would not: where the axis sticks the stages see -Fc, +Fc, -Fc, +Fc and
+    cancel (a plain RK4 written here, the sign at every stage, is off by more than 1e-3)."""
+    M, Fv, Fc, dt, n = 0.5, 0.1, 1.0, 0.002, 1500
+    g = GreyBox("rigid_axis", dt, [CoulombFriction("tau")], fixed={"offset": 0.0})
+    g._set(g._structure(), {"M": M, "Fv": Fv, "offset": 0.0, "coulomb_friction@tau.Fc": Fc},
+           {}, ["M", "Fv", "coulomb_friction@tau.Fc"], 1, 1, substeps=1)
+    u = 1.5 * np.sin(2 * np.pi * np.arange(n) * dt)
+    a = Fv / M
+
+    def exact():
+        x, v = np.zeros(n), np.zeros(n)
+        for k in range(n - 1):
+            vinf = (u[k] - Fc * np.sign(v[k])) / Fv
+            x[k + 1] = x[k] + vinf * dt + (v[k] - vinf) * (1 - np.exp(-a * dt)) / a
+            v[k + 1] = vinf + (v[k] - vinf) * np.exp(-a * dt)
+        return x, v
+
+    def stagewise():          # plain RK4, the sign evaluated at every stage
+        f = lambda k, v: (u[k] - Fv * v - Fc * np.sign(v)) / M   # noqa: E731
+        x, v = np.zeros(n), np.zeros(n)
+        for k in range(n - 1):
+            a1 = f(k, v[k])
+            a2 = f(k, v[k] + 0.5 * dt * a1)
+            a3 = f(k, v[k] + 0.5 * dt * a2)
+            a4 = f(k, v[k] + dt * a3)
+            x[k + 1] = x[k] + dt / 6 * (v[k] + 2 * (v[k] + 0.5 * dt * a1)
+                                        + 2 * (v[k] + 0.5 * dt * a2) + v[k] + dt * a3)
+            v[k + 1] = v[k] + dt / 6 * (a1 + 2 * a2 + 2 * a3 + a4)
+        return x
+
+    x, v = exact()
+    starts = np.array([1, 400, 700])
+    want = x[starts[None, :] + np.arange(1, 701)[:, None]]
+    span = np.max(np.abs(x))
+    for compiled in (True, False):
+        h = g if compiled else _numpy_only(g)
+        got = h.windows(u[:, None], x[:, None], starts, 700, x[starts][:, None],
+                        v[starts][:, None], integrator="rk4")[:, :, 0]
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-9 * span, err_msg=str(compiled))
+    assert np.max(np.abs(stagewise() - x)) > 1e-3 * span    # the stage-wise sign's error

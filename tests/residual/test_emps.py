@@ -110,7 +110,7 @@ def test_emps_pulses_resonance_is_unexplained(emps_selection):
     p = load_emps("DATA_EMPS_PULSES")
     sig = {"tau": p["force"], "q": p["qm"]}
     # the two timings compared under one estimator, IDIM-LS (on PULSES output error is chosen
-    # under the hold: p 1e-4, Euler windows)
+    # under the hold: p 0.001 at level 0.005 on RK4 windows, the sign held over each step)
     sampled = analyse("rigid_axis", p["t"], sig, free_run=False, timing="sampled",
                       estimator="idim-ls")
     names = [s.candidate.effect.name for s in sampled.steps]

@@ -18,9 +18,10 @@ def _run(rec, keys, model, extra=None, estimator="idim-ls"):
     """The loop with IDIM-LS pinned: these tests are about which effects are found. (With the
     default estimator choice, output error is chosen on the Coulomb + delay record, p 9e-14,
     and moves Fc from 1.36 to 1.15 against the generator's 1.5 (measured): the generator
-    integrates Fc sign(v) by RK4 at one step per sample, whose stages cancel the sign where
-    |v| < dt Fc / (2 M) (see selection._estimator_windows), and adds an unmeasured force
-    noise, so the plain sign that simulates its record best on Euler windows is lower; not
+    integrates Fc sign(v) by RK4 at one step per sample with the sign evaluated at every
+    stage, whose stages cancel it where |v| < dt Fc / (2 M) (the windows hold it over a step:
+    GreyBox._rollout), and adds an unmeasured force noise, so the plain sign that simulates
+    its record best on the windows is lower; measured in session 7 on Euler windows, not
     investigated further.)"""
     return analyse(model, rec["t"], {k: rec[k] for k in keys}, extra=extra, free_run=False,
                    estimator=estimator)

@@ -79,8 +79,7 @@ def _simulation_error_baseline(sel, p: dict) -> tuple:
     from cdam_core.residual.validation import BlockedCV
     m, sig = sel.declared.model, sel.declared.signals
     f = fit(m, sig, (CoulombFriction("tau"),), sel.settings["trim"])
-    cv = BlockedCV(m, sig, sel.settings["trim"], integrator="euler")   # a plain sign: see
-    # selection._estimator_windows
+    cv = BlockedCV(m, sig, sel.settings["trim"])   # RK4 windows, the sign held over a step
     g = greybox_of(f, cv.dt)
     cv.refine(g, f, cv.inputs(f.effects), np.ones(cv.Y.shape[0], bool))
     sc = simulation_score(g, p["force"][:, None], p["qm"][:, None], EMPS_PROTOCOL["n_init"],

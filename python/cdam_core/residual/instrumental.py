@@ -76,7 +76,7 @@ def _iv(y, W, Z) -> tuple:
     return th, s2 * Zi @ (Z.T @ Z) @ Zi.T, Zi
 
 
-def _simulated_signals(fitted: Fit, sig, U, horizon: int, trim: int):
+def _simulated_signals(fitted: Fit, sig, U, horizon: int, trim: int, integrator: str = "rk4"):
     """``sig`` with each position replaced by the auxiliary model's, simulated on consecutive
     windows and then filtered and differentiated exactly as the measured positions were (the
     instruments must see the filter the regressors saw); and the mask of rows the windows
@@ -97,7 +97,7 @@ def _simulated_signals(fitted: Fit, sig, U, horizon: int, trim: int):
     x0 = np.column_stack([np.asarray(sig[p], dtype=float)[starts] for p in pos])
     v0 = np.column_stack([np.asarray(sig[p + "_d"], dtype=float)[starts] for p in pos])
     g = greybox_of(fitted, dt)
-    P = g.windows(U, Y, starts, H, x0, v0)                  # (H, W, m): rows start+1..start+H
+    P = g.windows(U, Y, starts, H, x0, v0, integrator=integrator)   # rows start+1..start+H
     rows = (starts[None, :] + np.arange(1, H + 1)[:, None]).ravel()
     raw = {name: sig[name] for name in model.signals if name not in pos}
     for j, p in enumerate(pos):
@@ -113,9 +113,12 @@ def _simulated_signals(fitted: Fit, sig, U, horizon: int, trim: int):
     return out, covered
 
 
-def iv_fit(fitted: Fit, sig, U, horizon: int, trim: int, rows=None) -> tuple[Fit, dict]:
+def iv_fit(fitted: Fit, sig, U, horizon: int, trim: int, rows=None,
+           integrator: str = "rk4") -> tuple[Fit, dict]:
     """IDIM-IV from the IDIM-LS fit ``fitted`` on the prepared record ``sig`` (inputs ``U`` as
-    :class:`GreyBox` takes them; ``rows``: a fold's boolean mask). Returns the fit (residuals
+    :class:`GreyBox` takes them; ``rows``: a fold's boolean mask; ``integrator``: the auxiliary
+    model's windows, "rk4" (the validation windows', the switching terms held over a step) or
+    "euler", the model kind's; session 7 ran them by Euler). Returns the fit (residuals
     on every kept row, as IDIM-LS's) and a report (iterations, converged, the LS estimates).
     Raises ValueError when the auxiliary model cannot be simulated or the instruments are
     singular."""
@@ -136,7 +139,7 @@ def iv_fit(fitted: Fit, sig, U, horizon: int, trim: int, rows=None) -> tuple[Fit
     theta = {p: float(fitted.theta[p]) for p in est}
     info = {"iterations": 0, "converged": False, "idim_ls": dict(theta)}
     for it in range(1, MAX_ITERATIONS + 1):
-        sim, covered = _simulated_signals(current, sig, U, horizon, trim)
+        sim, covered = _simulated_signals(current, sig, U, horizon, trim, integrator)
         r = use & covered
         if int(r.sum()) <= 2 * len(est):
             raise ValueError(f"rows: {int(r.sum())} rows left for the instruments")

@@ -27,6 +27,7 @@ import dataclasses
 import numpy as np
 
 from cdam_core.base.checks import as_2d
+from cdam_core.models.greybox import trace as tr
 from cdam_core.models.greybox.declared import DerivativeFilter, SignalFilters
 from cdam_core.models.greybox.effects import LIBRARY, Effect
 from cdam_core.models.greybox.estimation import apply_effects, design, fit as idim_fit
@@ -332,7 +333,11 @@ class GreyBox(Model):
         ``integrator``: "euler", the model kind's semi-implicit Euler with ``substeps_`` per
         sample (what a saved model and the firmware run), or "rk4", classical Runge-Kutta with
         the inputs held over the sample (zero-order hold, as the measured torque is) and the
-        same substeps (the simulation windows; see :meth:`_choose_substeps` for the accuracy).
+        same substeps (the simulation windows; see :meth:`_choose_substeps` for the accuracy);
+        its switching terms (a dry friction's sign, a direction test: :data:`.trace.SWITCHING`)
+        are evaluated once per step at the step's start state and held over its four stages,
+        as a firmware step holds them (evaluated at each stage, where the motion sticks the
+        stages see -Fc, +Fc, -Fc, +Fc and RK4's weights 1, 2, 2, 1 cancel the friction).
         ``thetas``: (G, parameters) values in the order of ``theta_``, the W lanes split into G
         consecutive groups, each simulated with its own parameters (batched perturbations).
 
@@ -365,9 +370,15 @@ class GreyBox(Model):
             if th.shape[0] > 1 else None
         lane_inv = np.repeat(inv, per, axis=0)
 
-        def acc(x, v, u, ex, k, t):
+        switches = tr.Switches()
+
+        def acc(x, v, u, ex, k, t, stage=None):
             zero = np.zeros_like(x)
+            if stage is not None:   # RK4: switching terms held from the step's first stage
+                switches.record() if stage == 0 else switches.replay()
+                x, v = tr.held(x, switches), tr.held(v, switches)
             e = self._errors(self._state(x, v, zero, u, ex, k, t), pre_all, theta=theta)
+            e = np.asarray(e, dtype=float)
             if theta is None:
                 return (self._inertia @ e).T
             return np.einsum("wij,jw->wi", lane_inv, e)
@@ -384,13 +395,13 @@ class GreyBox(Model):
                     v = v + h * acc(x, v, u, ex, k, t)
                     x = x + h * v
                     continue
-                a1 = acc(x, v, u, ex, k, t)
+                a1 = acc(x, v, u, ex, k, t, 0)
                 x2, v2 = x + 0.5 * h * v, v + 0.5 * h * a1
-                a2 = acc(x2, v2, u, ex, k, t)
+                a2 = acc(x2, v2, u, ex, k, t, 1)
                 x3, v3 = x + 0.5 * h * v2, v + 0.5 * h * a2
-                a3 = acc(x3, v3, u, ex, k, t)
+                a3 = acc(x3, v3, u, ex, k, t, 2)
                 x4, v4 = x + h * v3, v + h * a3
-                a4 = acc(x4, v4, u, ex, k, t)
+                a4 = acc(x4, v4, u, ex, k, t, 3)
                 x = x + h / 6.0 * (v + 2.0 * v2 + 2.0 * v3 + v4)
                 v = v + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
             if not np.all(np.isfinite(x)) or np.max(np.abs(x), initial=0.0) > 1e9:
@@ -421,7 +432,6 @@ class GreyBox(Model):
     def _compiled(self, u_all, ex_all, pre_all):
         """The tape of the model's accelerations for this series layout, or None (no extension
         function, or the equations cannot be traced)."""
-        from cdam_core.models.greybox import trace as tr
         if not self.compiled:
             return None
         try:
@@ -444,7 +454,6 @@ class GreyBox(Model):
     def _trace(self, u_all, ex_all, pre_all):
         """The tape of the equation errors (:mod:`.trace`) and its output nodes; the series
         columns are the inputs, the external columns, then the whole-record effect columns."""
-        from cdam_core.models.greybox import trace as tr
         m = self._m
         tape = tr.Tape()
         col = iter(range(10 ** 9))

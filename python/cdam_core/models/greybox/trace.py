@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["Sym", "TraceError", "Tape", "floats", "OPS"]
+__all__ = ["Sym", "TraceError", "Tape", "floats", "OPS", "SWITCHING", "Switches", "held"]
 
 # operation codes shared with cpp/bindings/greybox.cpp (keep the order)
 OPS = ("C", "X", "V", "S", "T", "P", "add", "sub", "mul", "div", "neg", "sign", "tanh", "sin",
@@ -184,6 +184,75 @@ class Sym:
 
 
 def floats(x):
-    """``np.asarray(x, dtype=float)``, leaving a traced value as it is (the model code calls
-    this where it converts a signal or state entry)."""
-    return x if getattr(x, "__cdam_trace__", False) else np.asarray(x, dtype=float)
+    """``np.asarray(x, dtype=float)``, leaving a traced value or a :class:`Held` state as it
+    is (the model code calls this where it converts a signal or state entry)."""
+    if getattr(x, "__cdam_trace__", False) or (isinstance(x, Held) and x.dtype.kind == "f"):
+        return x
+    return np.asarray(x, dtype=float)
+
+
+# -- switching terms held over a Runge-Kutta step (the numpy twin of the compiled rollout) -----
+# The operations whose value jumps with the state (a dry friction's sign, a direction test):
+# evaluated once per step at its start state and held over the step's four RK4 stages (the
+# zero-order hold of a switching term; ``_core.greybox_rollout`` holds the same tape nodes).
+SWITCHING = (np.sign, np.greater, np.less, np.greater_equal, np.less_equal)
+
+
+class Switches:
+    """The switching operations' results of one step: recorded at its first stage (in call
+    order), replayed at the others."""
+
+    def __init__(self):
+        self.values, self.at = [], None
+
+    def record(self):
+        self.values, self.at = [], None
+
+    def replay(self):
+        self.at = 0
+
+    def take(self, value):
+        if self.at is None:
+            self.values.append(value)
+            return value
+        if self.at >= len(self.values):
+            raise RuntimeError("held switches: a stage made more switching operations than "
+                               "the step's first")
+        value, self.at = self.values[self.at], self.at + 1
+        return value
+
+
+class Held(np.ndarray):
+    """A state array whose switching operations (:data:`SWITCHING`), and those of every array
+    computed from it, go through ``switches`` (a :class:`Switches`)."""
+
+    switches = None
+
+    def __array_finalize__(self, obj):
+        self.switches = getattr(obj, "switches", None)
+
+    def __array_ufunc__(self, ufunc, method, *inputs, **kwargs):
+        sw = next(x.switches for x in inputs if isinstance(x, Held))
+        args = [x.view(np.ndarray) if isinstance(x, Held) else x for x in inputs]
+        if kwargs.get("out") is not None:
+            kwargs["out"] = tuple(o.view(np.ndarray) if isinstance(o, Held) else o
+                                  for o in kwargs["out"])
+        res = getattr(ufunc, method)(*args, **kwargs)
+        if method == "__call__" and ufunc in SWITCHING and sw is not None:
+            res = sw.take(np.asarray(res))
+        return _held(res, sw)
+
+
+def _held(res, sw):
+    if isinstance(res, tuple):
+        return tuple(_held(r, sw) for r in res)
+    if isinstance(res, np.ndarray) and res.ndim:
+        out = res.view(Held)
+        out.switches = sw
+        return out
+    return res
+
+
+def held(x, switches: Switches) -> "Held":
+    """``x`` (an array) whose switching operations go through ``switches``."""
+    return _held(np.asarray(x, dtype=float), switches)
