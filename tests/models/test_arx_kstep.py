@@ -139,21 +139,35 @@ def _linear(n, seed):
     return U, Y + 0.002 * rng.normal(size=Y.shape)
 
 
-@pytest.mark.parametrize("plant, kept", [(_plant, True), (_linear, False)])
-def test_anchored_fitter_keeps_the_network_only_where_validation_says_so(plant, kept):
+@pytest.mark.parametrize("plant, kept, blend", [(_plant, True, "none"),
+                                                (_plant, True, "validation"),
+                                                (_linear, False, "validation")])
+def test_anchored_fitter_keeps_the_network_only_where_validation_says_so(plant, kept, blend):
     from cdam_core.evaluate.crossfold import AnchoredFitter
+    from cdam_core.models.kstep_blend import KStepBlend
     fit_parts, valid_parts = [plant(1500, 11), plant(1500, 12)], [plant(1000, 13)]
     fit, valid = _stack(fit_parts), _stack(valid_parts)
     train = _stack(fit_parts + valid_parts)
     fitter = AnchoredFitter(grid={"small": {"hidden": 4, "lags": 1, "horizon": 10}},
                             fixed={"epochs": 8, "weighting": "base"},
-                            arx_grid=((1, 1, 1), (2, 1, 1)), groups=(), blind=())
+                            arx_grid=((1, 1, 1), (2, 1, 1)), groups=(), blind=(),
+                            blend=blend)
     model = fitter(train, fit, valid)
     c = fitter.choices[-1]
+    # two inputs: physics features are no candidate, the anchor is the raw-input ARX
+    assert c["anchor_features"] == "raw" and all(k.startswith("raw ")
+                                                 for k in c["anchor_validation"])
     if kept:
-        assert c["chosen"] == "small" and isinstance(model, ArxKStep)
-        assert list(model.arx_.orders) == c["arx_orders"]
-        assert c["validation"]["small"] < c["validation"]["arx"]
-        assert model.epochs == c["epochs"] >= 1 and model.n_outputs_ == 2
+        assert c["chosen"] == "small" and c["validation"]["small"] < c["validation"]["arx"]
+        net = model
+        if blend == "validation":         # the raw ARX (the anchor) and the network, blended
+            assert isinstance(model, KStepBlend) and len(model.components_) == 2
+            assert type(model.components_[0]) is ArxModel
+            assert np.array_equal(model.weights_, np.asarray(c["blend_weights"]))
+            assert model.weights_.shape == (50, 2, 2)    # steps: max(select_horizons, K)
+            net = model.components_[-1]
+        assert isinstance(net, ArxKStep)
+        assert list(net.arx_.orders) == c["arx_orders"]
+        assert net.epochs == c["epochs"] >= 1 and net.n_outputs_ == 2
     else:
         assert c["chosen"] == "arx" and type(model) is ArxModel

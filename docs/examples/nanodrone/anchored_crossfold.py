@@ -41,7 +41,7 @@ from cdam_core.models.flight.hybrid import QuadHybrid  # noqa: E402
 from cdam_core.record.realdata.nanodrone import nanodrone_files  # noqa: E402
 
 AT = (1, 5, 10, 20, 50)
-SHOWN = ("naive", "arx", "quad_hybrid", "anchored")
+SHOWN = ("naive", "arx", "anchor", "quad_hybrid", "anchored")
 PAPERNETS = Path(__file__).resolve().parents[1] / "papernets" / "results.json"
 
 
@@ -78,6 +78,10 @@ def main(argv=None) -> int:
     ap.add_argument("out", help="output folder (created)")
     ap.add_argument("--types", default=",".join(TYPES))
     ap.add_argument("--quick", action="store_true", help="tiny settings (output check only)")
+    ap.add_argument("--cache", default=None,
+                    help="folder of trained networks (reused when parameters and data match)")
+    ap.add_argument("--no-quad-hybrid", action="store_true",
+                    help="leave the physics + network model (quad_hybrid) out")
     ap.add_argument("--merge", nargs="+", default=None,
                     help="join the folds.pkl of earlier runs' folders (no training)")
     args = ap.parse_args(argv)
@@ -100,7 +104,7 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     fixed = dict(ANCHORED_FIXED, epochs=2) if args.quick else None
     hybrid_kw = dict(epochs=2) if args.quick else {}
-    fitter = AnchoredFitter(fixed=fixed)
+    fitter = AnchoredFitter(fixed=fixed, cache=args.cache)
 
     def quad_hybrid(train, fit, valid):
         dt = float(np.median(np.diff(train.t)))
@@ -109,8 +113,11 @@ def main(argv=None) -> int:
     loaded, folds, md = {}, [], []
     for test_type in [t.strip() for t in args.types.split(",") if t.strip()]:
         t0 = time.perf_counter()
+        models = {} if args.no_quad_hybrid else {"quad_hybrid": quad_hybrid}
+        models["anchored"] = fitter
+        models["anchor"] = lambda train, fit, valid: fitter.anchor_   # the anchor ARX alone
         f = cross_trajectory_fold(files, test_type, loaded=loaded, physics=False,
-                                  models={"quad_hybrid": quad_hybrid, "anchored": fitter})
+                                  models=models)
         folds.append(f)
         c = fitter.choices[-1]
         head = (f"## Test type {test_type} (ARX orders {tuple(f.orders)}; anchored: chosen "
@@ -119,7 +126,7 @@ def main(argv=None) -> int:
                 + f"; selection {c['select_seconds']:.0f} s, final fit {c['fit_seconds']:.0f} s;"
                 f" fold {time.perf_counter() - t0:.0f} s)")
         body = [rmse_table(f.scores), "", "Horizons (of 1..50) where anchored is below:", "",
-                *wins(f.scores, ("naive", "arx", "quad_hybrid"))]
+                *wins(f.scores, ("naive", "arx", "anchor", "quad_hybrid"))]
         print(head + "\n\n" + "\n".join(body) + "\n", flush=True)
         md += [head, "", *body, ""]
     with open(out / "folds.pkl", "wb") as fh:
@@ -140,7 +147,7 @@ def _write(out, folds, choices, md, fixed) -> int:
         if nets:
             extra["paper networks (best of each h)"] = np.min(np.stack(list(nets.values())), 0)
     body = [rmse_table(mean), "", "Horizons (of 1..50) where anchored is below:", "",
-            *wins(mean, ("naive", "arx", "quad_hybrid"), extra=extra)]
+            *wins(mean, ("naive", "arx", "anchor", "quad_hybrid"), extra=extra)]
     print("## Mean over the folds\n\n" + "\n".join(body), flush=True)
     page = ["# ARX-anchored k-step model on the cross-trajectory protocol", "",
             "Produced by `python docs/examples/nanodrone/anchored_crossfold.py OUT_DIR`. RMSE "
