@@ -1,23 +1,31 @@
-"""The ARX-anchored k-step model (kind arx_kstep) on the nano-drone benchmark's cross-trajectory
-protocol, beside naive, the chosen ARX and the physics + network model (quad_hybrid).
+"""The ARX-anchored k-step model on the nano-drone benchmark's cross-trajectory protocol, beside
+naive, the chosen ARX and (optionally) the physics + network model (quad_hybrid).
 
     python docs/examples/nanodrone/anchored_crossfold.py OUT_DIR [--types square,random1,...]
-        [--quick]
+        [--quick] [--cache DIR] [--no-quad-hybrid]
 
-Per fold (``cdam_core.evaluate.crossfold.AnchoredFitter`` through ``cross_trajectory_fold``):
-the ARX's orders chosen on the training flights (the fold's baseline); the network on the ARX's
-k-step residual trained on the fit flights, its epoch count taken where the validation flights'
-k-step error is least, kept only if it lowers the validation score (MAE / naive, mean over
-h = 1, 10, 25, 50 and the groups) below the ARX's, then retrained on all training flights.
-quad_hybrid runs with the structure its validation chose on every fold last time (its
-defaults). Every predictor scored on the test type at every horizon 1..50 on the same rows.
-Prints and writes (OUT_DIR/index.md, results.json) the RMSE per group at h = 1, 5, 10, 20, 50
-per fold and the mean over the folds, and per group the horizons where the anchored model is
-below each of the others; with the committed papernets results (docs/examples/papernets/
-results.json) beside it, the horizons where it is below every paper network's mean curve.
-``--quick``: tiny settings (checks the output, numbers not meaningful). The folds can run as
-separate processes (``--types square,random1`` into A, ``--types random2,multisine`` into B;
-each writes its folds to folds.pkl) and be joined with ``--merge A B`` (the page of all folds).
+Per fold (``cdam_core.evaluate.crossfold.AnchoredFitter`` through ``cross_trajectory_fold``),
+every choice on the validation flights of the training types (the last run of each type; the
+test type never seen): the anchor ARX's features (raw rotor speeds or their physics features)
+and orders; for each network structure of ``ANCHORED_GRID``, the network on the anchor's
+k-step residual trained on the fit flights, its epoch count where the validation flights'
+k-step error is least; the blend (kind ``kstep_blend``) of the raw-input ARX, the anchor and
+the network with convex weights per prediction step 1..50 and group chosen by least squares on
+the validation flights' k-step errors; the structure of least validation score (MAE / naive,
+mean over h = 1, 10, 25, 50 and the groups), all its parts retrained on all training flights.
+Scored beside it on the test type at every horizon 1..50 on the same rows: naive, ``arx`` (the
+fold's baseline: raw inputs, orders chosen on the training flights), ``anchor`` (the anchor
+ARX alone), ``network`` (the anchor + network model without the blend) and quad_hybrid (its
+defaults; left out with ``--no-quad-hybrid``). Prints and writes (OUT_DIR/index.md,
+results.json) the RMSE per group at h = 1, 5, 10, 20, 50 per fold and the mean over the folds,
+and per group the horizons where the anchored model is below each of the others; with the
+committed papernets results (docs/examples/papernets/results.json) beside it, the horizons
+where it is below every paper network's mean curve. ``--quick``: tiny settings (checks the
+output, numbers not meaningful). ``--cache DIR``: trained networks kept there and reused when
+parameters and data match (training is deterministic: the same seed gives the same network).
+The folds can run as separate processes (``--types square,random1`` into A, ``--types
+random2,multisine`` into B; each writes its folds to folds.pkl) and be joined with ``--merge A
+B`` (the page of all folds).
 """
 import os
 
@@ -41,7 +49,7 @@ from cdam_core.models.flight.hybrid import QuadHybrid  # noqa: E402
 from cdam_core.record.realdata.nanodrone import nanodrone_files  # noqa: E402
 
 AT = (1, 5, 10, 20, 50)
-SHOWN = ("naive", "arx", "anchor", "quad_hybrid", "anchored")
+SHOWN = ("naive", "arx", "anchor", "network", "quad_hybrid", "anchored")
 PAPERNETS = Path(__file__).resolve().parents[1] / "papernets" / "results.json"
 
 
@@ -56,6 +64,23 @@ def rmse_table(scores, names=SHOWN, at=AT) -> str:
             r = scores.group_rmse[name][scores.horizons.index(h)]
             lines.append(f"| {name} | {h} | " + " | ".join(f"{v:.4g}" for v in r) + " |")
     return "\n".join(lines)
+
+
+def blend_table(choice, scores, at=(1, 5, 10, 20, 50)) -> list[str]:
+    """Markdown: the blend's weights per group (one output of each) at the steps ``at``."""
+    if not choice.get("blend_weights"):
+        return []
+    W = np.asarray(choice["blend_weights"])
+    parts = choice["blend_components"]
+    lines = ["Blend weights (" + " / ".join(parts) + ") chosen on the validation flights:", "",
+             "| h | " + " | ".join(g.name for g in scores.groups) + " |",
+             "|---|" + "---|" * len(scores.groups)]
+    for h in at:
+        row = W[min(h, W.shape[0]) - 1]
+        cells = [" / ".join(f"{v:.2f}" for v in row[scores.outputs.index(g.columns[0])])
+                 for g in scores.groups]
+        lines.append(f"| {h} | " + " | ".join(cells) + " |")
+    return lines
 
 
 def wins(scores, against, model="anchored", extra=None) -> list[str]:
@@ -116,16 +141,19 @@ def main(argv=None) -> int:
         models = {} if args.no_quad_hybrid else {"quad_hybrid": quad_hybrid}
         models["anchored"] = fitter
         models["anchor"] = lambda train, fit, valid: fitter.anchor_   # the anchor ARX alone
+        models["network"] = lambda train, fit, valid: fitter.network_ or fitter.anchor_
         f = cross_trajectory_fold(files, test_type, loaded=loaded, physics=False,
                                   models=models)
         folds.append(f)
         c = fitter.choices[-1]
-        head = (f"## Test type {test_type} (ARX orders {tuple(f.orders)}; anchored: chosen "
+        head = (f"## Test type {test_type} (ARX orders {tuple(f.orders)}; anchor: "
+                f"{c['anchor_features']} ARX {tuple(c['arx_orders'])}; anchored: chosen "
                 f"{c['chosen']}, epochs {c['epochs']}; validation MAE / naive "
                 + ", ".join(f"{k} {v:.4f}" for k, v in c["validation"].items())
                 + f"; selection {c['select_seconds']:.0f} s, final fit {c['fit_seconds']:.0f} s;"
                 f" fold {time.perf_counter() - t0:.0f} s)")
-        body = [rmse_table(f.scores), "", "Horizons (of 1..50) where anchored is below:", "",
+        body = [rmse_table(f.scores), "", *blend_table(c, f.scores), "",
+                "Horizons (of 1..50) where anchored is below:", "",
                 *wins(f.scores, ("naive", "arx", "anchor", "quad_hybrid"))]
         print(head + "\n\n" + "\n".join(body) + "\n", flush=True)
         md += [head, "", *body, ""]
@@ -153,9 +181,13 @@ def _write(out, folds, choices, md, fixed) -> int:
             "Produced by `python docs/examples/nanodrone/anchored_crossfold.py OUT_DIR`. RMSE "
             "per group (position m, velocity m/s, attitude rad, rates rad/s) on the test type, "
             "k-step from the measured state with the measured rotor speeds, all predictors on "
-            "the same rows. anchored: kind arx_kstep, structures " + json.dumps(ANCHORED_GRID)
-            + " over " + json.dumps(fixed) + " (the epoch count: the validation "
-            "flights' best); the paper networks' curves are the committed "
+            "the same rows. anchored: kind kstep_blend of the raw-input ARX (arx), the anchor "
+            "ARX (features and orders chosen on the validation flights) and the network on "
+            "its k-step residual (kind arx_kstep, structures " + json.dumps(ANCHORED_GRID)
+            + " over " + json.dumps(fixed) + "; the epoch count: the validation "
+            "flights' best), convex weights per step and group chosen by least squares on the "
+            "validation flights; network: the arx_kstep model alone; the paper networks' "
+            "curves are the committed "
             "docs/examples/papernets/results.json (same folds and test flights).", "",
             f"## Mean over the {len(folds)} folds", "", *body, "", *md]
     write_text_atomic(out / "index.md", "\n".join(page) + "\n")

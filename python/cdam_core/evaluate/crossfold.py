@@ -404,11 +404,12 @@ class AnchoredFitter:
         final = fitted_arxs(train)
         #: the anchor fitted on all training flights (the model when the ARX wins)
         self.anchor_ = final[-1]
+        self.network_ = None               #: the network model alone (None: the ARX won)
         if chosen == "arx":
             model = self.anchor_
         else:
-            model = self._trained({**common, **self.fixed, **self.grid[chosen],
-                                   "epochs": epochs[chosen]}, train)
+            model = self.network_ = self._trained({**common, **self.fixed, **self.grid[chosen],
+                                                   "epochs": epochs[chosen]}, train)
             hist["final"] = model.history_
             if w is not None:
                 model = KStepBlend(final + [model], weights=w, groups=labels)
