@@ -7,7 +7,7 @@ import pytest
 from scipy.optimize import minimize
 
 from cdam_core.models import ArxModel, KStepBlend
-from cdam_core.models.kstep_blend import blend_sums, simplex_weights
+from cdam_core.models.kstep_blend import blend_sums, minimax_weights, simplex_weights
 
 
 def _qp_reference(G, b):
@@ -45,6 +45,31 @@ def test_simplex_weights_are_the_constrained_least_squares(J):
         mine = W[0, 1:]
         assert mine @ Gd @ mine - 2 * bd @ mine <= f + 1e-9 * max(1, abs(f))
         np.testing.assert_allclose(mine, x, atol=1e-5)
+
+
+@pytest.mark.parametrize("J", [1, 2])
+def test_minimax_weights_are_the_grid_point_of_least_worst_unit(J):
+    rng = np.random.default_rng(10 + J)
+    units = [rng.normal(size=(J + 1, 150, 3)) * rng.uniform(0.3, 2, size=(J + 1, 1, 1))
+             for _ in range(3)]
+    Ys = [rng.normal(size=(150, 3)) + u[-1] * s for u, s in zip(units, (1.0, 0.2, -0.5))]
+    sums = [blend_sums(P, Y) for P, Y in zip(units, Ys)]
+    G = np.stack([g for g, _ in sums])[:, None]          # (units, 1 step, m, J, J)
+    b = np.stack([v for _, v in sums])[:, None]
+    c = np.stack([np.sum((Y - P[0]) ** 2, axis=0) for P, Y in zip(units, Ys)])[:, None]
+    W = minimax_weights(G, b, c, [0, 0, 1], resolution=20)[0]
+    # plain numpy: every grid point's blended predictions, each unit's squared error over
+    # the reference's, per group (outputs 0-1 and 2)
+    grid = [np.array(p) / 20 for p in np.ndindex(*(21,) * J) if sum(p) <= 20]
+    for cols in ([0, 1], [2]):
+        def worst(w):
+            lam = np.concatenate([[1 - w.sum()], w])
+            return max(np.sum((np.einsum("j,jri->ri", lam, P) - Y)[:, cols] ** 2)
+                       / np.sum((P[0] - Y)[:, cols] ** 2) for P, Y in zip(units, Ys))
+        scores = [worst(w) for w in grid]
+        best = grid[int(np.argmin(scores))]
+        np.testing.assert_allclose(W[cols[0], 1:], best, atol=1e-12)
+        assert worst(W[cols[0], 1:]) <= 1 + 1e-12 and np.allclose(W[cols, 0], W[cols[0], 0])
 
 
 def _plant(n, seed):
@@ -148,5 +173,7 @@ def test_bad_input_is_named(blend):
         KStepBlend([comps[0], ArxModel((1, 1, 1))]).choose(U, Y)
     with pytest.raises(ValueError, match="weights: none"):
         KStepBlend([ArxModel((1, 1, 1)), ArxModel((2, 1, 1))]).fit(U, Y)
+    with pytest.raises(ValueError, match=r"units: expected one label per row \(2000\)"):
+        KStepBlend(comps, groups=[0, 1]).choose(U, Y, units=[0, 1])
     with pytest.raises(ValueError, match="groups: 3 labels for 2 outputs"):
         KStepBlend(comps, weights=w, groups=[0, 1, 2])

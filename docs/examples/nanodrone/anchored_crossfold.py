@@ -10,8 +10,9 @@ test type never seen): the anchor ARX's features (raw rotor speeds or their phys
 and orders; for each network structure of ``ANCHORED_GRID``, the network on the anchor's
 k-step residual trained on the fit flights, its epoch count where the validation flights'
 k-step error is least; the blend (kind ``kstep_blend``) of the raw-input ARX, the anchor and
-the network with convex weights per prediction step 1..50 and group chosen by least squares on
-the validation flights' k-step errors; the structure of least validation score (MAE / naive,
+the network with convex weights per prediction step 1..50 and group chosen on the validation
+flights' k-step errors (the point of a 0.01 grid of the simplex whose worst validation flight
+has the least error relative to the raw-input ARX's: ``AnchoredFitter(blend_rule="worst")``); the structure of least validation score (MAE / naive,
 mean over h = 1, 10, 25, 50 and the groups), all its parts retrained on all training flights.
 Scored beside it on the test type at every horizon 1..50 on the same rows: naive, ``arx`` (the
 fold's baseline: raw inputs, orders chosen on the training flights), ``anchor`` (the anchor
@@ -185,8 +186,10 @@ def _write(out, folds, choices, md, fixed) -> int:
             "ARX (features and orders chosen on the validation flights) and the network on "
             "its k-step residual (kind arx_kstep, structures " + json.dumps(ANCHORED_GRID)
             + " over " + json.dumps(fixed) + "; the epoch count: the validation "
-            "flights' best), convex weights per step and group chosen by least squares on the "
-            "validation flights; network: the arx_kstep model alone; the paper networks' "
+            "flights' best), convex weights per step and group chosen on the validation "
+            "flights (one per training type: the 0.01-grid point of the simplex whose worst "
+            "flight has the least error relative to the raw-input ARX's); network: the "
+            "arx_kstep model alone; the paper networks' "
             "curves are the committed "
             "docs/examples/papernets/results.json (same folds and test flights).", "",
             f"## Mean over the {len(folds)} folds", "", *body, "", *md]

@@ -33,6 +33,7 @@ from cdam_core.models.arx import FEATURES, ArxModel
 from cdam_core.models.kstep_blend import KStepBlend
 
 BLENDS = ("none", "validation")
+BLEND_RULES = ("worst", "pooled")
 from cdam_core.models.flight.physics import QuadPhysics
 from cdam_core.record.realdata.nanodrone import load_nanodrone, trajectory_type
 from cdam_core.record.stack import stack_records
@@ -275,10 +276,13 @@ class AnchoredFitter:
     flights' k-step error (the best epoch kept). With ``blend="validation"`` (default) the
     model is a ``KStepBlend`` of the raw-input ARX (the reference: orders chosen as the fold's
     baseline chooses them), the anchor (when it is not that ARX) and the network model, its
-    convex weights per prediction step (1..max(``select_horizons``, K)) and group chosen by
-    least squares on the validation flights' k-step errors (``models.kstep_blend``: on those
-    flights no group is worse at any step than any component); ``"none"``: the network model
-    alone. Each candidate is scored on the validation flights as the anchor is; the least
+    convex weights per prediction step (1..max(``select_horizons``, K)) and group chosen on
+    the validation flights' k-step errors (``models.kstep_blend``): with ``blend_rule="worst"``
+    (default) the point of a 0.01 grid of the simplex whose worst validation flight (one per
+    training type) has the least error relative to the raw-input ARX's, so that on no
+    validation flight is a group worse than that ARX at any step; ``"pooled"``: least squares
+    pooled over the validation flights (no group worse than any component in the sum over the
+    flights). ``blend="none"``: the network model alone. Each candidate is scored on the validation flights as the anchor is; the least
     wins. The anchor winning, the model is the anchor fitted on all training flights; else the
     chosen structure retrained on all training flights for its best validation epoch count
     (the ARXs refitted there too), blended with the weights chosen on the validation flights.
@@ -288,7 +292,8 @@ class AnchoredFitter:
 
     def __init__(self, grid=None, fixed=None, select_horizons=(1, 10, 25, 50),
                  arx_grid=ARX_GRID, groups=NANODRONE_GROUPS, blind=ANCHORED_BLIND,
-                 anchor_features=("raw", "physics"), blend="validation", cache=None):
+                 anchor_features=("raw", "physics"), blend="validation", cache=None,
+                 blend_rule="worst"):
         self.grid = dict(ANCHORED_GRID if grid is None else grid)
         self.fixed = dict(ANCHORED_FIXED if fixed is None else fixed)
         if not self.grid:
@@ -304,6 +309,9 @@ class AnchoredFitter:
             raise ValueError(f"blend: unknown {blend!r}; use 'none' or 'validation'")
         self.blend = blend
         self.cache = None if cache is None else Path(cache)
+        if blend_rule not in BLEND_RULES:
+            raise ValueError(f"blend_rule: unknown {blend_rule!r}; use 'worst' or 'pooled'")
+        self.blend_rule = blend_rule
         self.choices = []
 
     def _trained(self, params, stack, valid=None):
@@ -385,8 +393,10 @@ class AnchoredFitter:
             try:
                 m = self._trained({**common, **self.fixed, **kw}, fit, valid)
                 if self.blend == "validation":
+                    units = None if self.blend_rule == "pooled" else valid.record
                     m = KStepBlend(base + [m], groups=labels).choose(
-                        valid.U, valid.Y, valid.lengths, horizon=max(steps, m.horizon))
+                        valid.U, valid.Y, valid.lengths, horizon=max(steps, m.horizon),
+                        units=units)
                     weights[name] = m.weights_
                     net = m.components_[-1]
                 else:

@@ -28,7 +28,7 @@ from cdam_core.base.checks import positive_int
 from cdam_core.models.protocol import Model
 from cdam_core.models.schema import field_array
 
-__all__ = ["KStepBlend", "simplex_weights", "blend_sums"]
+__all__ = ["KStepBlend", "simplex_weights", "minimax_weights", "blend_sums", "simplex_grid"]
 
 
 def _qp_simplex(G, b):
@@ -83,6 +83,39 @@ def simplex_weights(G, b, labels):
         for g in np.unique(lab):
             sel = lab == g
             w = _qp_simplex(G[k, sel].sum(axis=0), b[k, sel].sum(axis=0))
+            W[k, sel, 1:] = w
+            W[k, sel, 0] = 1.0 - w.sum()
+    return W
+
+
+def simplex_grid(J, resolution):
+    """Every w with w_j in {0, 1/r, .., 1} and sum w <= 1 (J columns), w = 0 first."""
+    pts = [p for p in itertools.product(range(resolution + 1), repeat=J) if sum(p) <= resolution]
+    return np.asarray(pts, dtype=float).reshape(-1, J) / resolution
+
+
+def minimax_weights(G, b, c, labels, resolution: int = 100):
+    """Weights (steps, m, J + 1) on the simplex from per-unit sums (units: e.g. one record of
+    each kind): G (units, steps, m, J, J), b (units, steps, m, J) as ``blend_sums`` gives them,
+    c (units, steps, m) the reference's sum of squared errors. Per step and group (``labels``)
+    the point of ``simplex_grid(J, resolution)`` whose largest ratio over the units of its
+    squared error to the reference's is least (the first such point: ties keep the
+    reference)."""
+    G, b, c = np.asarray(G, float), np.asarray(b, float), np.asarray(c, float)
+    n_units, steps, m, J = b.shape
+    lab = np.asarray(labels)
+    if lab.size != m:
+        raise ValueError(f"groups: {lab.size} labels for {m} outputs")
+    pts = simplex_grid(J, int(resolution))
+    W = np.zeros((steps, m, J + 1))
+    for k in range(steps):
+        for g in np.unique(lab):
+            sel = lab == g
+            Gg, bg, cg = G[:, k, sel].sum(axis=1), b[:, k, sel].sum(axis=1), c[:, k, sel].sum(1)
+            f = (cg[:, None] - 2 * bg @ pts.T
+                 + np.einsum("pj,ujl,pl->up", pts, Gg, pts))        # (units, points)
+            ratio = f / np.where(cg > 0, cg, 1.0)[:, None]
+            w = pts[int(np.argmin(ratio.max(axis=0)))]
             W[k, sel, 1:] = w
             W[k, sel, 0] = 1.0 - w.sum()
     return W
@@ -188,25 +221,43 @@ class KStepBlend(Model):
                 raise RuntimeError("components: rollouts not aligned")   # pragma: no cover
             yield k, rows, np.stack([p[2] for p in parts])
 
-    def choose(self, U, Y, segments=None, horizon: int = 50):
+    def choose(self, U, Y, segments=None, horizon: int = 50, units=None,
+               resolution: int = 100):
         """Choose the weights (``horizon`` steps) on records (U, Y, segments) held out of the
-        components' training (module doc); returns self."""
+        components' training (module doc); returns self. ``units``: a label per row (e.g. the
+        record, or the record's kind): then per step and group the weights on a grid of the
+        simplex (``resolution``) whose worst unit's error relative to the reference is least
+        (``minimax_weights``) instead of the least squares pooled over the rows."""
         horizon = positive_int(horizon, "horizon")
         if not all(c.is_fitted() for c in self.components_):
             raise ValueError("components: fit every component before choosing the weights")
         self._setup()
         m, J = self.n_outputs_, len(self.components_) - 1
-        G, b = np.zeros((horizon, m, J, J)), np.zeros((horizon, m, J))
         Y = np.asarray(Y, float)
+        if units is None:
+            code = np.zeros(len(Y), int)
+        else:
+            if np.shape(units) != (len(Y),):
+                raise ValueError(f"units: expected one label per row ({len(Y)})")
+            code = np.unique(np.asarray(units), return_inverse=True)[1].ravel()
+        nu = int(code.max()) + 1 if code.size else 1
+        G, b = np.zeros((nu, horizon, m, J, J)), np.zeros((nu, horizon, m, J))
+        c = np.zeros((nu, horizon, m))
         n = 0
         for k, rows, P in self._joint_rollout(U, Y, horizon, segments):
-            g, v = blend_sums(P, Y[rows])
-            G[k - 1] += g
-            b[k - 1] += v
+            for u in range(nu):
+                r = code[rows] == u
+                g, v = blend_sums(P[:, r], Y[rows[r]])
+                G[u, k - 1] += g
+                b[u, k - 1] += v
+                c[u, k - 1] += np.sum((Y[rows[r]] - P[0, r]) ** 2, axis=0)
             n += rows.size
         if not n:
             raise ValueError(f"U: no window of {horizon} steps in the records")
-        self.weights_ = simplex_weights(G, b, self._labels())
+        if units is None:
+            self.weights_ = simplex_weights(G[0], b[0], self._labels())
+        else:
+            self.weights_ = minimax_weights(G, b, c, self._labels(), resolution)
         return self
 
     # -- prediction ----------------------------------------------------------------------------
