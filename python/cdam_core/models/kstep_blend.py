@@ -7,11 +7,18 @@ combined per step k and output i with convex weights::
     y_k,i = sum_j lambda_{k,i,j} P_j,k,i,     lambda >= 0,  sum_j lambda = 1
 
 The weights are the same for every output of a group (``groups``: a label per output) and are
-chosen by :func:`simplex_weights` on records held out of the components' training: per step and
-group, the lambda on the simplex of least summed squared k-step error over those records'
-windows and the group's outputs (a convex quadratic program, solved exactly by enumerating its
-active sets). On those records no group is then worse at any step than any single component
-(each vertex of the simplex is a candidate). Steps beyond the weights' rows take the last row
+chosen (``choose``) on records held out of the components' training, per step and group:
+
+- pooled (:func:`simplex_weights`): the lambda on the simplex of least summed squared k-step
+  error over those records' windows and the group's outputs (a convex quadratic program,
+  solved exactly by enumerating its active sets); on those records no group is then worse at
+  any step than any single component (each vertex of the simplex is a candidate);
+- worst unit (:func:`minimax_weights`, ``units``: a label per row, e.g. the record): the point
+  of a grid of the simplex whose largest ratio over the units of its squared error to the
+  reference's (component 0) is least; on no unit is a group then worse than the reference at
+  any step.
+
+Steps beyond the weights' rows take the last row
 (free run). One-step prediction is the step-1 blend.
 
 A blend only reports: every component runs on its own predictions (nothing blended is fed
