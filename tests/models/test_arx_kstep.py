@@ -139,21 +139,117 @@ def _linear(n, seed):
     return U, Y + 0.002 * rng.normal(size=Y.shape)
 
 
-@pytest.mark.parametrize("plant, kept", [(_plant, True), (_linear, False)])
-def test_anchored_fitter_keeps_the_network_only_where_validation_says_so(plant, kept):
+@pytest.mark.parametrize("plant, kept, blend", [(_plant, True, "none"),
+                                                (_plant, True, "validation"),
+                                                (_linear, False, "validation")])
+def test_anchored_fitter_keeps_the_network_only_where_validation_says_so(plant, kept, blend):
     from cdam_core.evaluate.crossfold import AnchoredFitter
+    from cdam_core.models.kstep_blend import KStepBlend
     fit_parts, valid_parts = [plant(1500, 11), plant(1500, 12)], [plant(1000, 13)]
     fit, valid = _stack(fit_parts), _stack(valid_parts)
     train = _stack(fit_parts + valid_parts)
     fitter = AnchoredFitter(grid={"small": {"hidden": 4, "lags": 1, "horizon": 10}},
                             fixed={"epochs": 8, "weighting": "base"},
-                            arx_grid=((1, 1, 1), (2, 1, 1)), groups=(), blind=())
+                            arx_grid=((1, 1, 1), (2, 1, 1)), groups=(), blind=(),
+                            blend=blend)
     model = fitter(train, fit, valid)
     c = fitter.choices[-1]
+    # two inputs: physics features are no candidate, the anchor is the raw-input ARX
+    assert c["anchor_features"] == "raw" and all(k.startswith("raw ")
+                                                 for k in c["anchor_validation"])
     if kept:
-        assert c["chosen"] == "small" and isinstance(model, ArxKStep)
-        assert list(model.arx_.orders) == c["arx_orders"]
-        assert c["validation"]["small"] < c["validation"]["arx"]
-        assert model.epochs == c["epochs"] >= 1 and model.n_outputs_ == 2
+        assert c["chosen"] == "small" and c["validation"]["small"] < c["validation"]["arx"]
+        net = model
+        if blend == "validation":         # the raw ARX (the anchor) and the network, blended
+            assert isinstance(model, KStepBlend) and len(model.components_) == 2
+            assert type(model.components_[0]) is ArxModel
+            assert np.array_equal(model.weights_, np.asarray(c["blend_weights"]))
+            assert model.weights_.shape == (50, 2, 2)    # steps: max(select_horizons, K)
+            net = model.components_[-1]
+        assert isinstance(net, ArxKStep)
+        assert list(net.arx_.orders) == c["arx_orders"]
+        assert net.epochs == c["epochs"] >= 1 and net.n_outputs_ == 2
     else:
         assert c["chosen"] == "arx" and type(model) is ArxModel
+
+
+def _rotors(n, seed):
+    """Four positive smooth 'rotor speeds' and two outputs driven by their squares (a roll-like
+    difference and a thrust-like sum): physics features fit, raw inputs do not."""
+    rng = np.random.default_rng(seed)
+    U = np.ones((n, 4))
+    Y = np.zeros((n, 2))
+    for t in range(1, n):
+        U[t] = 1 + 0.9 * (U[t - 1] - 1) + 0.12 * rng.normal(size=4)
+        f = U[t - 1] ** 2
+        Y[t] = [0.8 * Y[t - 1, 0] + 0.3 * (f[0] + f[3] - f[1] - f[2]),
+                0.7 * Y[t - 1, 1] + 0.2 * (f.sum() - 4)]
+    return U, Y + 0.003 * rng.normal(size=Y.shape)
+
+
+def _numpy_relative_error(parts_fit, U, Y, na, nb, physics, horizons):
+    """Independent of the package: ARX(na, nb, 1) on raw inputs or on [u/s, T, roll, pitch,
+    yaw] (f = (u/s)^2, s = the fit records' max |u|) by numpy least squares over the fit records
+    (no regressor across records), k-step from each origin on (U, Y); the mean over horizons
+    and outputs of its MAE over the naive MAE on the rows t >= t0 + k - 1."""
+    s = np.max(np.abs(np.vstack([u for u, _ in parts_fit])), axis=0)
+
+    def feats(u):
+        if not physics:
+            return u
+        f = (u / s) ** 2
+        return np.c_[u / s, f.sum(1), f[:, 0] + f[:, 3] - f[:, 1] - f[:, 2],
+                     f[:, 0] + f[:, 1] - f[:, 2] - f[:, 3], f[:, 0] - f[:, 1] + f[:, 2] - f[:, 3]]
+
+    t0 = max(na, nb)
+
+    def reg(F, Z, t):
+        return np.concatenate([Z[t - j] for j in range(1, na + 1)]
+                              + [F[t - 1 - j] for j in range(nb)] + [[1.0]])
+
+    A, T = [], []
+    for u, y in parts_fit:
+        F = feats(u)
+        A += [reg(F, y, t) for t in range(t0, len(u))]
+        T += [y[t] for t in range(t0, len(u))]
+    W = np.linalg.lstsq(np.array(A), np.array(T), rcond=None)[0]
+    F = feats(U)
+    ratios = []
+    for k in horizons:
+        rows = np.arange(t0 + k - 1, len(Y))
+        P = np.empty((rows.size, Y.shape[1]))
+        for i, t in enumerate(rows):
+            Z = Y[:t + 1].copy()
+            for s_ in range(t - k + 1, t + 1):
+                Z[s_] = reg(F, Z, s_) @ W
+            P[i] = Z[t]
+        ratios.append(np.mean(np.abs(P - Y[rows]), 0) / np.mean(np.abs(Y[rows - k] - Y[rows]), 0))
+    return float(np.mean(ratios))
+
+
+def test_anchored_fitter_chooses_the_anchors_features_and_orders_on_validation():
+    from cdam_core.evaluate.crossfold import AnchoredFitter
+    fit_parts, valid_parts = [_rotors(700, 21), _rotors(700, 22)], [_rotors(400, 23)]
+    fit, valid = _stack(fit_parts), _stack(valid_parts)
+    fit.inputs = valid.inputs = ["u0", "u1", "u2", "u3"]
+    train = _stack(fit_parts + valid_parts)
+    train.inputs = fit.inputs
+    grid = ((1, 1, 1), (2, 2, 1))
+    fitter = AnchoredFitter(grid={"tiny": {"hidden": 2, "lags": 1, "horizon": 5}},
+                            fixed={"epochs": 2, "net_features": "raw"}, arx_grid=grid,
+                            select_horizons=(1, 5), groups=(), blind=())
+    fitter(train, fit, valid)
+    c = fitter.choices[-1]
+    Uv, Yv = valid_parts[0]
+    mine = {f"{'physics' if ph else 'raw'} {na},{nb},1":
+            _numpy_relative_error(fit_parts, Uv, Yv, na, nb, ph, (1, 5))
+            for ph in (False, True) for na, nb, _ in grid}
+    assert c["anchor_validation"].keys() == mine.keys()
+    for k, v in mine.items():
+        assert c["anchor_validation"][k] == pytest.approx(v, rel=1e-9), k
+    best = min(mine, key=mine.get)
+    assert best.startswith("physics") and mine[best] < 0.8 * min(
+        v for k, v in mine.items() if k.startswith("raw"))
+    assert f"{c['anchor_features']} {','.join(map(str, c['arx_orders']))}" == best
+    assert fitter.anchor_.features == "physics" and list(fitter.anchor_.orders) == \
+        c["arx_orders"]

@@ -7,8 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from cdam_core.models import (ArxKStep, ArxModel, BPNetwork, HybridNarx, QuadHybrid, QuadPhysics,
-                              load_model, read_model_file, save_model)
+from cdam_core.models import (ArxKStep, ArxModel, BPNetwork, HybridNarx, KStepBlend, QuadHybrid,
+                              QuadPhysics, load_model, read_model_file, save_model)
 from cdam_core.models.file import KINDS as FILE_KINDS
 from cdam_core.models.greybox.augmented import GreyBox
 from cdam_core.models.greybox.effects import CoulombFriction
@@ -64,7 +64,18 @@ KINDS = {
     "arx_kstep": lambda: (ArxKStep((2, 2, 1), hidden=3, horizon=5, lags=2, epochs=3, stride=10,
                                    net_features="physics", blind=[0, 1, 2],
                                    groups=[0, 0, 0, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3]), _quad()),
+    "kstep_blend": lambda: _blend(),
 }
+
+
+def _blend():
+    """An ARX and an ARX on physics features blended with fixed weights over 4 steps (fit
+    refits both, the weights kept)."""
+    U, Y = _quad()
+    comps = [ArxModel((1, 1, 1)).fit(U, Y), ArxModel((2, 1, 1), "physics").fit(U, Y)]
+    w = np.random.default_rng(0).uniform(size=(4, Y.shape[1], 1))
+    return KStepBlend(comps, weights=np.concatenate([w, 1 - w], axis=2),
+                      groups=[0, 0, 0, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3]), (U, Y)
 
 
 def test_every_registered_kind_has_a_round_trip_case():

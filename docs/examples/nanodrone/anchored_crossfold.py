@@ -1,23 +1,32 @@
-"""The ARX-anchored k-step model (kind arx_kstep) on the nano-drone benchmark's cross-trajectory
-protocol, beside naive, the chosen ARX and the physics + network model (quad_hybrid).
+"""The ARX-anchored k-step model on the nano-drone benchmark's cross-trajectory protocol, beside
+naive, the chosen ARX and (optionally) the physics + network model (quad_hybrid).
 
     python docs/examples/nanodrone/anchored_crossfold.py OUT_DIR [--types square,random1,...]
-        [--quick]
+        [--quick] [--cache DIR] [--no-quad-hybrid]
 
-Per fold (``cdam_core.evaluate.crossfold.AnchoredFitter`` through ``cross_trajectory_fold``):
-the ARX's orders chosen on the training flights (the fold's baseline); the network on the ARX's
-k-step residual trained on the fit flights, its epoch count taken where the validation flights'
-k-step error is least, kept only if it lowers the validation score (MAE / naive, mean over
-h = 1, 10, 25, 50 and the groups) below the ARX's, then retrained on all training flights.
-quad_hybrid runs with the structure its validation chose on every fold last time (its
-defaults). Every predictor scored on the test type at every horizon 1..50 on the same rows.
-Prints and writes (OUT_DIR/index.md, results.json) the RMSE per group at h = 1, 5, 10, 20, 50
-per fold and the mean over the folds, and per group the horizons where the anchored model is
-below each of the others; with the committed papernets results (docs/examples/papernets/
-results.json) beside it, the horizons where it is below every paper network's mean curve.
-``--quick``: tiny settings (checks the output, numbers not meaningful). The folds can run as
-separate processes (``--types square,random1`` into A, ``--types random2,multisine`` into B;
-each writes its folds to folds.pkl) and be joined with ``--merge A B`` (the page of all folds).
+Per fold (``cdam_core.evaluate.crossfold.AnchoredFitter`` through ``cross_trajectory_fold``),
+every choice on the validation flights of the training types (the last run of each type; the
+test type never seen): the anchor ARX's features (raw rotor speeds or their physics features)
+and orders; for each network structure of ``ANCHORED_GRID``, the network on the anchor's
+k-step residual trained on the fit flights, its epoch count where the validation flights'
+k-step error is least; the blend (kind ``kstep_blend``) of the raw-input ARX, the anchor and
+the network with convex weights per prediction step 1..50 and group chosen on the validation
+flights' k-step errors (the point of a 0.01 grid of the simplex whose worst validation flight
+has the least error relative to the raw-input ARX's: ``AnchoredFitter(blend_rule="worst")``); the structure of least validation score (MAE / naive,
+mean over h = 1, 10, 25, 50 and the groups), all its parts retrained on all training flights.
+Scored beside it on the test type at every horizon 1..50 on the same rows: naive, ``arx`` (the
+fold's baseline: raw inputs, orders chosen on the training flights), ``anchor`` (the anchor
+ARX alone), ``network`` (the anchor + network model without the blend) and quad_hybrid (its
+defaults; left out with ``--no-quad-hybrid``). Prints and writes (OUT_DIR/index.md,
+results.json) the RMSE per group at h = 1, 5, 10, 20, 50 per fold and the mean over the folds,
+and per group the horizons where the anchored model is below each of the others; with the
+committed papernets results (docs/examples/papernets/results.json) beside it, the horizons
+where it is below every paper network's mean curve. ``--quick``: tiny settings (checks the
+output, numbers not meaningful). ``--cache DIR``: trained networks kept there and reused when
+parameters and data match (training is deterministic: the same seed gives the same network).
+The folds can run as separate processes (``--types square,random1`` into A, ``--types
+random2,multisine`` into B; each writes its folds to folds.pkl) and be joined with ``--merge A
+B`` (the page of all folds).
 """
 import os
 
@@ -41,7 +50,7 @@ from cdam_core.models.flight.hybrid import QuadHybrid  # noqa: E402
 from cdam_core.record.realdata.nanodrone import nanodrone_files  # noqa: E402
 
 AT = (1, 5, 10, 20, 50)
-SHOWN = ("naive", "arx", "quad_hybrid", "anchored")
+SHOWN = ("naive", "arx", "anchor", "network", "quad_hybrid", "anchored")
 PAPERNETS = Path(__file__).resolve().parents[1] / "papernets" / "results.json"
 
 
@@ -56,6 +65,23 @@ def rmse_table(scores, names=SHOWN, at=AT) -> str:
             r = scores.group_rmse[name][scores.horizons.index(h)]
             lines.append(f"| {name} | {h} | " + " | ".join(f"{v:.4g}" for v in r) + " |")
     return "\n".join(lines)
+
+
+def blend_table(choice, scores, at=(1, 5, 10, 20, 50)) -> list[str]:
+    """Markdown: the blend's weights per group (one output of each) at the steps ``at``."""
+    if not choice.get("blend_weights"):
+        return []
+    W = np.asarray(choice["blend_weights"])
+    parts = choice["blend_components"]
+    lines = ["Blend weights (" + " / ".join(parts) + ") chosen on the validation flights:", "",
+             "| h | " + " | ".join(g.name for g in scores.groups) + " |",
+             "|---|" + "---|" * len(scores.groups)]
+    for h in at:
+        row = W[min(h, W.shape[0]) - 1]
+        cells = [" / ".join(f"{v:.2f}" for v in row[scores.outputs.index(g.columns[0])])
+                 for g in scores.groups]
+        lines.append(f"| {h} | " + " | ".join(cells) + " |")
+    return lines
 
 
 def wins(scores, against, model="anchored", extra=None) -> list[str]:
@@ -78,6 +104,10 @@ def main(argv=None) -> int:
     ap.add_argument("out", help="output folder (created)")
     ap.add_argument("--types", default=",".join(TYPES))
     ap.add_argument("--quick", action="store_true", help="tiny settings (output check only)")
+    ap.add_argument("--cache", default=None,
+                    help="folder of trained networks (reused when parameters and data match)")
+    ap.add_argument("--no-quad-hybrid", action="store_true",
+                    help="leave the physics + network model (quad_hybrid) out")
     ap.add_argument("--merge", nargs="+", default=None,
                     help="join the folds.pkl of earlier runs' folders (no training)")
     args = ap.parse_args(argv)
@@ -100,7 +130,7 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     fixed = dict(ANCHORED_FIXED, epochs=2) if args.quick else None
     hybrid_kw = dict(epochs=2) if args.quick else {}
-    fitter = AnchoredFitter(fixed=fixed)
+    fitter = AnchoredFitter(fixed=fixed, cache=args.cache)
 
     def quad_hybrid(train, fit, valid):
         dt = float(np.median(np.diff(train.t)))
@@ -109,17 +139,23 @@ def main(argv=None) -> int:
     loaded, folds, md = {}, [], []
     for test_type in [t.strip() for t in args.types.split(",") if t.strip()]:
         t0 = time.perf_counter()
+        models = {} if args.no_quad_hybrid else {"quad_hybrid": quad_hybrid}
+        models["anchored"] = fitter
+        models["anchor"] = lambda train, fit, valid: fitter.anchor_   # the anchor ARX alone
+        models["network"] = lambda train, fit, valid: fitter.network_ or fitter.anchor_
         f = cross_trajectory_fold(files, test_type, loaded=loaded, physics=False,
-                                  models={"quad_hybrid": quad_hybrid, "anchored": fitter})
+                                  models=models)
         folds.append(f)
         c = fitter.choices[-1]
-        head = (f"## Test type {test_type} (ARX orders {tuple(f.orders)}; anchored: chosen "
+        head = (f"## Test type {test_type} (ARX orders {tuple(f.orders)}; anchor: "
+                f"{c['anchor_features']} ARX {tuple(c['arx_orders'])}; anchored: chosen "
                 f"{c['chosen']}, epochs {c['epochs']}; validation MAE / naive "
                 + ", ".join(f"{k} {v:.4f}" for k, v in c["validation"].items())
                 + f"; selection {c['select_seconds']:.0f} s, final fit {c['fit_seconds']:.0f} s;"
                 f" fold {time.perf_counter() - t0:.0f} s)")
-        body = [rmse_table(f.scores), "", "Horizons (of 1..50) where anchored is below:", "",
-                *wins(f.scores, ("naive", "arx", "quad_hybrid"))]
+        body = [rmse_table(f.scores), "", *blend_table(c, f.scores), "",
+                "Horizons (of 1..50) where anchored is below:", "",
+                *wins(f.scores, ("naive", "arx", "anchor", "quad_hybrid"))]
         print(head + "\n\n" + "\n".join(body) + "\n", flush=True)
         md += [head, "", *body, ""]
     with open(out / "folds.pkl", "wb") as fh:
@@ -140,15 +176,21 @@ def _write(out, folds, choices, md, fixed) -> int:
         if nets:
             extra["paper networks (best of each h)"] = np.min(np.stack(list(nets.values())), 0)
     body = [rmse_table(mean), "", "Horizons (of 1..50) where anchored is below:", "",
-            *wins(mean, ("naive", "arx", "quad_hybrid"), extra=extra)]
+            *wins(mean, ("naive", "arx", "anchor", "quad_hybrid"), extra=extra)]
     print("## Mean over the folds\n\n" + "\n".join(body), flush=True)
     page = ["# ARX-anchored k-step model on the cross-trajectory protocol", "",
             "Produced by `python docs/examples/nanodrone/anchored_crossfold.py OUT_DIR`. RMSE "
             "per group (position m, velocity m/s, attitude rad, rates rad/s) on the test type, "
             "k-step from the measured state with the measured rotor speeds, all predictors on "
-            "the same rows. anchored: kind arx_kstep, structures " + json.dumps(ANCHORED_GRID)
-            + " over " + json.dumps(fixed) + " (the epoch count: the validation "
-            "flights' best); the paper networks' curves are the committed "
+            "the same rows. anchored: kind kstep_blend of the raw-input ARX (arx), the anchor "
+            "ARX (features and orders chosen on the validation flights) and the network on "
+            "its k-step residual (kind arx_kstep, structures " + json.dumps(ANCHORED_GRID)
+            + " over " + json.dumps(fixed) + "; the epoch count: the validation "
+            "flights' best), convex weights per step and group chosen on the validation "
+            "flights (one per training type: the 0.01-grid point of the simplex whose worst "
+            "flight has the least error relative to the raw-input ARX's); network: the "
+            "arx_kstep model alone; the paper networks' "
+            "curves are the committed "
             "docs/examples/papernets/results.json (same folds and test flights).", "",
             f"## Mean over the {len(folds)} folds", "", *body, "", *md]
     write_text_atomic(out / "index.md", "\n".join(page) + "\n")

@@ -29,7 +29,11 @@ import numpy as np
 from cdam_core.evaluate.baselines import ARX_GRID, relative_error, select_arx
 from cdam_core.evaluate.groups import NANODRONE_GROUPS
 from cdam_core.evaluate.horizons import HorizonScores, score_horizons
-from cdam_core.models.arx import ArxModel
+from cdam_core.models.arx import FEATURES, ArxModel
+from cdam_core.models.kstep_blend import KStepBlend
+
+BLENDS = ("none", "validation")
+BLEND_RULES = ("worst", "pooled")
 from cdam_core.models.flight.physics import QuadPhysics
 from cdam_core.record.realdata.nanodrone import load_nanodrone, trajectory_type
 from cdam_core.record.stack import stack_records
@@ -251,7 +255,8 @@ def hybrid_fold(files, test_type: str, grid=None, fixed=None, horizon: int = 50,
 #: see the position (``blind``: the dynamics do not depend on where the vehicle is); LM runs at
 #: most ``epochs`` epochs on the fit flights, the epoch of least validation k-step error is kept
 #: and the final fit on all training flights runs that many
-ANCHORED_GRID = {"h8_l2_K50": {"hidden": 8, "lags": 2, "horizon": 50}}
+ANCHORED_GRID = {"h8_l2_K50": {"hidden": 8, "lags": 2, "horizon": 50},
+                 "h8_l4_K50": {"hidden": 8, "lags": 4, "horizon": 50}}
 ANCHORED_FIXED = {"epochs": 20, "net_features": "physics", "weighting": "base", "stride": 100}
 ANCHORED_BLIND = ("x", "y", "z")
 
@@ -260,19 +265,35 @@ class AnchoredFitter:
     """``fit(train, fit, valid)`` for ``cross_trajectory_fold(models=...)``: the ARX-anchored
     k-step model, every choice on the validation flights of the training types.
 
-    The ARX's orders as the fold's baseline chooses them (``select_arx`` on the fit and
-    validation flights); each structure of ``grid`` (over ``fixed``) is trained on the fit
-    flights with those orders (error scales per group of ``groups``: the benchmark's position,
-    velocity, attitude, rates; the outputs ``blind`` hidden from the network), LM tracking the
-    validation flights' k-step error (the best epoch kept), and scored on the validation
-    flights by the mean over ``select_horizons`` and groups of its MAE over the naive MAE, as
-    is the ARX fitted on the fit flights; the least wins. The ARX winning, the model is the ARX
-    (``select_arx``'s, fitted on all training flights); else the chosen structure retrained on
-    all training flights for its best validation epoch count.
-    ``choices``: one record per call (orders, validation scores, chosen, epochs, fit seconds)."""
+    The anchor: an ARX whose features (each of ``anchor_features``: raw inputs, physics
+    features of four rotor speeds; a kind the inputs do not allow is skipped) and orders (of
+    ``arx_grid``) are chosen together on the validation flights (fitted on the fit flights,
+    scored as ``select_arx`` scores: the mean over ``select_horizons`` and groups of the MAE
+    over the naive MAE). With ``anchor_features=("raw",)`` the anchor is the fold's ARX
+    baseline. Each structure of ``grid`` (over ``fixed``) is trained on the fit flights on
+    that anchor (error scales per group of ``groups``: the benchmark's position, velocity,
+    attitude, rates; the outputs ``blind`` hidden from the network), LM tracking the validation
+    flights' k-step error (the best epoch kept). With ``blend="validation"`` (default) the
+    model is a ``KStepBlend`` of the raw-input ARX (the reference: orders chosen as the fold's
+    baseline chooses them), the anchor (when it is not that ARX) and the network model, its
+    convex weights per prediction step (1..max(``select_horizons``, K)) and group chosen on
+    the validation flights' k-step errors (``models.kstep_blend``): with ``blend_rule="worst"``
+    (default) the point of a 0.01 grid of the simplex whose worst validation flight (one per
+    training type) has the least error relative to the raw-input ARX's, so that on no
+    validation flight is a group worse than that ARX at any step; ``"pooled"``: least squares
+    pooled over the validation flights (no group worse than any component in the sum over the
+    flights). ``blend="none"``: the network model alone. Each candidate is scored on the validation flights as the anchor is; the least
+    wins. The anchor winning, the model is the anchor fitted on all training flights; else the
+    chosen structure retrained on all training flights for its best validation epoch count
+    (the ARXs refitted there too), blended with the weights chosen on the validation flights.
+    ``cache``: a folder where trained networks are kept and reused (``_trained``).
+    ``choices``: one record per call (anchor, orders, validation scores, chosen, epochs, blend
+    components and weights, seconds)."""
 
     def __init__(self, grid=None, fixed=None, select_horizons=(1, 10, 25, 50),
-                 arx_grid=ARX_GRID, groups=NANODRONE_GROUPS, blind=ANCHORED_BLIND):
+                 arx_grid=ARX_GRID, groups=NANODRONE_GROUPS, blind=ANCHORED_BLIND,
+                 anchor_features=("raw", "physics"), blend="validation", cache=None,
+                 blend_rule="worst"):
         self.grid = dict(ANCHORED_GRID if grid is None else grid)
         self.fixed = dict(ANCHORED_FIXED if fixed is None else fixed)
         if not self.grid:
@@ -281,7 +302,48 @@ class AnchoredFitter:
         self.arx_grid = arx_grid
         self.groups = list(groups)
         self.blind = tuple(blind)
+        self.anchor_features = tuple(anchor_features)
+        if not self.anchor_features or any(f not in FEATURES for f in self.anchor_features):
+            raise ValueError(f"anchor_features: expected some of {', '.join(FEATURES)}")
+        if blend not in BLENDS:
+            raise ValueError(f"blend: unknown {blend!r}; use 'none' or 'validation'")
+        self.blend = blend
+        self.cache = None if cache is None else Path(cache)
+        if blend_rule not in BLEND_RULES:
+            raise ValueError(f"blend_rule: unknown {blend_rule!r}; use 'worst' or 'pooled'")
+        self.blend_rule = blend_rule
         self.choices = []
+
+    def _trained(self, params, stack, valid=None):
+        """ArxKStep(**params) fitted on ``stack`` (LM tracking ``valid``), or the same model
+        from the ``cache`` folder: a pickle named by a digest of the parameters and the data (a
+        fit is deterministic: same seed, same result, so the cache only saves time)."""
+        import hashlib
+        import pickle
+
+        from cdam_core.models.arx_kstep import ArxKStep
+
+        path = None
+        if self.cache is not None:
+            h = hashlib.sha256(repr(sorted((k, repr(v)) for k, v in params.items()
+                                           if k != "threads")).encode())
+            for st in (stack, valid):
+                if st is not None:
+                    for a in (st.U, st.Y, np.asarray(st.lengths)):
+                        h.update(np.ascontiguousarray(a).tobytes())
+            path = self.cache / f"arx_kstep_{h.hexdigest()[:24]}.pkl"
+            if path.exists():
+                with open(path, "rb") as fh:       # written below by this process
+                    return pickle.load(fh)
+        m = ArxKStep(**params)
+        m.fit(stack.U, stack.Y, segments=stack.lengths,
+              validation=None if valid is None else (valid.U, valid.Y, valid.lengths))
+        if path is not None:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            with open(path.with_suffix(".tmp"), "wb") as fh:
+                pickle.dump(m, fh)
+            path.with_suffix(".tmp").replace(path)
+        return m
 
     def _labels(self, outputs):
         lab = np.full(len(outputs), -1)
@@ -295,23 +357,52 @@ class AnchoredFitter:
     def __call__(self, train, fit, valid):
         import time
 
-        from cdam_core.models.arx_kstep import ArxKStep
-
-        arx, orders, _ = select_arx(fit, valid, self.arx_grid, self.select_horizons,
-                                    self.groups)
-        common = {"narx": orders, "groups": self._labels(train.outputs),
-                  "blind": [list(train.outputs).index(c) for c in self.blind]}
-        base = ArxModel(orders).fit(fit.U, fit.Y, segments=fit.lengths)
-        val = {"arx": relative_error(base, valid, self.select_horizons, self.groups)}
-        epochs, hist = {}, {}
         t = time.perf_counter()
+        anchors = {}                       # (features, orders) -> validation score
+        for feat in self.anchor_features:
+            for orders in self.arx_grid:
+                orders = tuple(int(v) for v in orders)
+                try:
+                    m = ArxModel(orders, feat).fit(fit.U, fit.Y, segments=fit.lengths)
+                    anchors[feat, orders] = relative_error(m, valid, self.select_horizons,
+                                                           self.groups)
+                except ValueError:         # a diverging candidate or features the inputs
+                    continue               # do not allow: no candidate
+        if not anchors:
+            raise ValueError("arx_grid: every anchor candidate failed on the validation "
+                             "flights")
+        feat, orders = min(anchors, key=lambda a: (anchors[a], self.anchor_features.index(
+            a[0]), a[1]))
+        # the reference of the blend: the ARX on raw inputs with its orders chosen the same way
+        # (the fold's baseline), or the anchor when raw inputs are not a candidate
+        raw = [a for a in anchors if a[0] == "raw"]
+        ref = min(raw, key=lambda a: (anchors[a], a[1])) if raw else (feat, orders)
+        arxs = [ref] + ([(feat, orders)] if (feat, orders) != ref else [])
+
+        def fitted_arxs(st):
+            return [ArxModel(o, f).fit(st.U, st.Y, segments=st.lengths) for f, o in arxs]
+
+        common = {"narx": orders, "features": feat, "groups": self._labels(train.outputs),
+                  "blind": [list(train.outputs).index(c) for c in self.blind]}
+        labels = common["groups"]
+        steps = max(self.select_horizons)
+        val = {"arx": anchors[feat, orders]}
+        epochs, hist, weights = {}, {}, {}
+        base = fitted_arxs(fit) if self.blend == "validation" else []
         for name, kw in self.grid.items():
-            m = ArxKStep(**common, **{**self.fixed, **kw})
             try:
-                m.fit(fit.U, fit.Y, segments=fit.lengths,
-                      validation=(valid.U, valid.Y, valid.lengths))
+                m = self._trained({**common, **self.fixed, **kw}, fit, valid)
+                if self.blend == "validation":
+                    units = None if self.blend_rule == "pooled" else valid.record
+                    m = KStepBlend(base + [m], groups=labels).choose(
+                        valid.U, valid.Y, valid.lengths, horizon=max(steps, m.horizon),
+                        units=units)
+                    weights[name] = m.weights_
+                    net = m.components_[-1]
+                else:
+                    net = m
                 val[name] = relative_error(m, valid, self.select_horizons, self.groups)
-                epochs[name], hist[name] = m.history_["best_epoch"], m.history_
+                epochs[name], hist[name] = net.history_["best_epoch"], net.history_
             except ValueError:             # a diverging candidate is no candidate
                 val[name] = float("inf")
         select_seconds = time.perf_counter() - t
@@ -319,18 +410,33 @@ class AnchoredFitter:
         if chosen != "arx" and not epochs[chosen]:
             chosen = "arx"                 # no epoch lowered the validation error
         t = time.perf_counter()
+        w = weights.get(chosen)
+        final = fitted_arxs(train)
+        #: the anchor fitted on all training flights (the model when the ARX wins)
+        self.anchor_ = final[-1]
+        self.network_ = None               #: the network model alone (None: the ARX won)
         if chosen == "arx":
-            model = arx
+            model = self.anchor_
         else:
-            model = ArxKStep(**common, **{**self.fixed, **self.grid[chosen],
-                                          "epochs": epochs[chosen]})
-            model.fit(train.U, train.Y, segments=train.lengths)
-        self.choices.append({"arx_orders": list(orders), "validation": val, "chosen": chosen,
+            model = self.network_ = self._trained({**common, **self.fixed, **self.grid[chosen],
+                                                   "epochs": epochs[chosen]}, train)
+            hist["final"] = model.history_
+            if w is not None:
+                model = KStepBlend(final + [model], weights=w, groups=labels)
+        self.choices.append({"arx_orders": list(orders), "anchor_features": feat,
+                             "anchor_validation": {f"{f} {','.join(map(str, o))}": v
+                                                   for (f, o), v in anchors.items()},
+                             "blend_components": [f"{f} arx {','.join(map(str, o))}"
+                                                  for f, o in arxs] + ["network"],
+                             "validation": val, "chosen": chosen,
                              "epochs": epochs.get(chosen), "structure": {} if chosen == "arx"
                              else {**self.fixed, **self.grid[chosen],
                                    "epochs": epochs[chosen]},
+                             "blend_weights": None if w is None or chosen == "arx" else
+                             np.asarray(w).tolist(),
                              "select_seconds": select_seconds,
                              "fit_seconds": time.perf_counter() - t,
-                             "validation_history": hist,
-                             "history": getattr(model, "history_", None)})
+                             "validation_history": {k: v for k, v in hist.items()
+                                                    if k != "final"},
+                             "history": hist.get("final")})
         return model

@@ -4,7 +4,8 @@ Kinds: ``bp_network`` (:class:`BPNetwork`, static or NARX), ``arx`` (:class:`Arx
 ``hybrid`` (:class:`HybridNarx`: ARX + network on its residual), ``greybox`` (the declared
 grey-box model plus the effects the residual loop found, :mod:`.greybox`), ``arx_kstep``
 (:class:`ArxKStep`: ARX + recurrent network on its k-step residual, trained on the k-step
-error), the flight models (:mod:`.flight`).
+error), ``kstep_blend`` (:class:`KStepBlend`: fitted models blended per prediction step and
+group of outputs), the flight models (:mod:`.flight`).
 """
 from cdam_core.models.arx import ArxModel, physics_features
 from cdam_core.models.arx_kstep import ArxKStep
@@ -12,9 +13,11 @@ from cdam_core.models.flight.hybrid import QuadHybrid
 from cdam_core.models.flight.physics import QuadPhysics
 from cdam_core.models.file import KINDS, ModelFile, load_model, read_model_file, save_model
 from cdam_core.models.hybrid import HybridNarx
+from cdam_core.models.kstep_blend import KStepBlend
 from cdam_core.models.network import BPNetwork, hidden_node_candidates
 from cdam_core.models.protocol import Model, segment_bounds
 
-__all__ = ["ArxKStep", "ArxModel", "BPNetwork", "HybridNarx", "KINDS", "Model", "ModelFile",
+__all__ = ["ArxKStep", "ArxModel", "BPNetwork", "HybridNarx", "KINDS", "KStepBlend", "Model",
+           "ModelFile",
            "QuadHybrid", "QuadPhysics", "hidden_node_candidates", "load_model", "physics_features",
            "read_model_file", "save_model", "segment_bounds"]

@@ -4,7 +4,8 @@ Layout (JSON; schema: ``model-file.schema.json`` beside this module, documented 
 docs/MODEL_FILE.md)::
 
     {"format": "cdam-model", "version": 2, "kind": "bp_network" | "arx" | "hybrid" | "greybox"
-                                          | "quad_physics" | "quad_hybrid" | "arx_kstep",
+                                          | "quad_physics" | "quad_hybrid" | "arx_kstep"
+                                          | "kstep_blend",
      "inputs": [names], "outputs": [names], "preprocessing": {"smoothing_passes": int},
      "meta": {...free JSON...}, "model": {...the kind's section...},
      "monitor": {...optional: the residual monitor's statistics and thresholds...},
@@ -30,6 +31,7 @@ from cdam_core.models.flight.hybrid import QuadHybrid
 from cdam_core.models.flight.physics import QuadPhysics
 from cdam_core.models.greybox.augmented import GreyBox
 from cdam_core.models.hybrid import HybridNarx
+from cdam_core.models.kstep_blend import KStepBlend
 from cdam_core.models.network import BPNetwork
 from cdam_core.models.protocol import Model
 from cdam_core.models.schema import validate_document
@@ -38,7 +40,9 @@ FORMAT = "cdam-model"
 VERSION = 2
 KINDS: dict[str, type] = {"bp_network": BPNetwork, "arx": ArxModel, "hybrid": HybridNarx,
                           "greybox": GreyBox, "quad_physics": QuadPhysics,
-                          "quad_hybrid": QuadHybrid, "arx_kstep": ArxKStep}
+                          "quad_hybrid": QuadHybrid, "arx_kstep": ArxKStep,
+                          "kstep_blend": KStepBlend}
+KStepBlend.component_kinds = KINDS       # the blend's components: any kind the file knows
 MAX_FILE_BYTES = 256 * 1024 * 1024
 
 __all__ = ["save_model", "load_model", "read_model_file", "ModelFile", "FORMAT", "VERSION",

@@ -188,13 +188,14 @@ class Model(EstimatorParams, ABC):
                 P[a:b] = self._k_step(u, y, k)
         return P
 
-    def rollout(self, U, Y, horizon: int, segments=None, first: int = 1):
+    def rollout(self, U, Y, horizon: int, segments=None, first: int = 1, chunk=None):
         """Every k-step prediction for k = 1..``horizon`` in one pass: yields (k, rows, P),
         P (len(rows), m) predicting the rows ``rows`` from the measured outputs up to
         rows - k (the origin) and the model's own predictions after, with the measured
         inputs; equal to ``predict(mode="k_step", k=k)`` on those rows. Origins start at
         row max(t0, 1, first) - 1 of each segment; a horizon may come in several chunks
-        (bounded memory), and the k steps of all origins run together."""
+        (bounded memory; ``chunk`` origins each, default from the sizes), and the k steps of all
+        origins run together."""
         self._check_fitted()
         horizon = positive_int(horizon, "horizon")
         U, Y = as_2d(U, "U"), as_2d(Y, "Y")
@@ -213,7 +214,7 @@ class Model(EstimatorParams, ABC):
         origins = np.concatenate([np.arange(a + start - 1, b - 1) for a, b in bounds])
         seg_end = np.concatenate([np.full(max(b - 1 - (a + start - 1), 0), b)
                                   for a, b in bounds])
-        chunk = max(256, (1 << 22) // (width * (m + U.shape[1])))
+        chunk = int(chunk) if chunk else max(256, (1 << 22) // (width * (m + U.shape[1])))
         offs = np.arange(width) - (t0 - 1)            # buffer column -> row offset from origin
         for c in range(0, origins.size, chunk):
             o, end = origins[c:c + chunk], seg_end[c:c + chunk]

@@ -1,0 +1,179 @@
+"""Models blended per prediction step and group (kind kstep_blend, models/kstep_blend.py): the
+weights against scipy's constrained solver and a closed form, the blend of two ARX models
+against a plain numpy ARX (its own least squares and k-step loop), the validation guarantee,
+the protocol's modes agreeing, bad input named."""
+import numpy as np
+import pytest
+from scipy.optimize import minimize
+
+from cdam_core.models import ArxModel, KStepBlend
+from cdam_core.models.kstep_blend import blend_sums, minimax_weights, simplex_weights
+
+
+def _qp_reference(G, b):
+    """min w'Gw - 2b'w on w >= 0, sum w <= 1 by scipy's SLSQP from every vertex."""
+    n = b.size
+    cons = [{"type": "ineq", "fun": lambda w: 1 - w.sum(), "jac": lambda w: -np.ones(n)}]
+    best = None
+    for w0 in [np.zeros(n)] + list(np.eye(n)) + [np.full(n, 1.0 / (n + 1))]:
+        r = minimize(lambda w: w @ G @ w - 2 * b @ w, w0, jac=lambda w: 2 * G @ w - 2 * b,
+                     bounds=[(0, 1)] * n, constraints=cons, method="SLSQP",
+                     options={"ftol": 1e-14, "maxiter": 500})
+        if best is None or r.fun < best.fun:
+            best = r
+    return best.x, best.fun
+
+
+@pytest.mark.parametrize("J", [1, 2, 3])
+def test_simplex_weights_are_the_constrained_least_squares(J):
+    rng = np.random.default_rng(J)
+    for trial in range(12):
+        # J + 1 predictors of 2 outputs (one group) on 200 rows; the errors e of the reference
+        P = rng.normal(size=(J + 1, 200, 2)) * rng.uniform(0.2, 2, size=(J + 1, 1, 1))
+        Y = rng.normal(size=(200, 2)) + (trial % 3) * P[-1]
+        G, b = blend_sums(P, Y)
+        W = simplex_weights(G[None], b[None], [0, 0])[0]        # (2 outputs, J + 1)
+        assert np.allclose(W[0], W[1]) and np.all(W >= 0) and np.isclose(W[0].sum(), 1)
+        D = P[1:] - P[0]
+        e = Y - P[0]
+        Gd = np.einsum("jri,lri->jl", D, D)                    # plain sums, independent
+        bd = np.einsum("jri,ri->j", D, e)
+        if J == 1:
+            w = np.clip(bd[0] / Gd[0, 0], 0, 1)
+            assert W[0, 1] == pytest.approx(w, abs=1e-12)
+        x, f = _qp_reference(Gd, bd)
+        mine = W[0, 1:]
+        assert mine @ Gd @ mine - 2 * bd @ mine <= f + 1e-9 * max(1, abs(f))
+        np.testing.assert_allclose(mine, x, atol=1e-5)
+
+
+@pytest.mark.parametrize("J", [1, 2])
+def test_minimax_weights_are_the_grid_point_of_least_worst_unit(J):
+    rng = np.random.default_rng(10 + J)
+    units = [rng.normal(size=(J + 1, 150, 3)) * rng.uniform(0.3, 2, size=(J + 1, 1, 1))
+             for _ in range(3)]
+    Ys = [rng.normal(size=(150, 3)) + u[-1] * s for u, s in zip(units, (1.0, 0.2, -0.5))]
+    sums = [blend_sums(P, Y) for P, Y in zip(units, Ys)]
+    G = np.stack([g for g, _ in sums])[:, None]          # (units, 1 step, m, J, J)
+    b = np.stack([v for _, v in sums])[:, None]
+    c = np.stack([np.sum((Y - P[0]) ** 2, axis=0) for P, Y in zip(units, Ys)])[:, None]
+    W = minimax_weights(G, b, c, [0, 0, 1], resolution=20)[0]
+    # plain numpy: every grid point's blended predictions, each unit's squared error over
+    # the reference's, per group (outputs 0-1 and 2)
+    grid = [np.array(p) / 20 for p in np.ndindex(*(21,) * J) if sum(p) <= 20]
+    for cols in ([0, 1], [2]):
+        def worst(w):
+            lam = np.concatenate([[1 - w.sum()], w])
+            return max(np.sum((np.einsum("j,jri->ri", lam, P) - Y)[:, cols] ** 2)
+                       / np.sum((P[0] - Y)[:, cols] ** 2) for P, Y in zip(units, Ys))
+        scores = [worst(w) for w in grid]
+        best = grid[int(np.argmin(scores))]
+        np.testing.assert_allclose(W[cols[0], 1:], best, atol=1e-12)
+        assert worst(W[cols[0], 1:]) <= 1 + 1e-12 and np.allclose(W[cols, 0], W[cols[0], 0])
+
+
+def _plant(n, seed):
+    """Two outputs, two smooth inputs, a cubic term an ARX(1, 1, 1) lacks."""
+    rng = np.random.default_rng(seed)
+    U = np.zeros((n, 2))
+    Y = np.zeros((n, 2))
+    for t in range(1, n):
+        U[t] = 0.9 * U[t - 1] + 0.3 * rng.normal(size=2)
+        y1, y2 = Y[t - 1]
+        Y[t] = [0.9 * y1 + 0.1 * y2 + 0.3 * U[t - 1, 0] - 0.2 * y2 ** 3,
+                0.7 * y2 + 0.4 * U[t - 1, 1] + 0.1 * U[t - 1, 0] ** 2]
+    return U, Y + 0.01 * rng.normal(size=Y.shape)
+
+
+def _numpy_arx_kstep(U, Y, Ut, Yt, k, na, nb):
+    """ARX(na, nb, 1) by numpy least squares on (U, Y), k-step predictions on (Ut, Yt): row t
+    from the measured rows up to t - k, its own predictions after (rows before t0 + k - 1
+    measured)."""
+    t0 = max(na, nb)
+
+    def reg(Uc, Yc, t):
+        return np.concatenate([Yc[t - j] for j in range(1, na + 1)]
+                              + [Uc[t - 1 - j] for j in range(nb)] + [[1.0]])
+
+    A = np.array([reg(U, Y, t) for t in range(t0, len(U))])
+    W = np.linalg.lstsq(A, Y[t0:], rcond=None)[0]
+    P = Yt.copy()
+    for t in range(t0 + k - 1, len(Ut)):
+        Z = Yt[:t + 1].copy()
+        for s in range(t - k + 1, t + 1):
+            Z[s] = reg(Ut, Z, s) @ W
+        P[t] = Z[t]
+    return P
+
+
+@pytest.fixture(scope="module")
+def blend():
+    U, Y = _plant(2000, 1)
+    Uv, Yv = _plant(800, 2)
+    comps = [ArxModel((1, 1, 1)).fit(U, Y), ArxModel((2, 2, 1)).fit(U, Y)]
+    return KStepBlend(comps, groups=[0, 1]).choose(Uv, Yv, horizon=6), (U, Y), (Uv, Yv)
+
+
+def test_blend_of_two_arx_models_against_numpy(blend):
+    model, (U, Y), (Uv, Yv) = blend
+    t0 = 2
+    for k in (1, 3, 6):
+        a = _numpy_arx_kstep(U, Y, Uv, Yv, k, 1, 1)
+        c = _numpy_arx_kstep(U, Y, Uv, Yv, k, 2, 2)
+        rows = np.arange(t0 + k - 1, len(Yv))        # the rows both predict (the blend's t0)
+        d, e = (c - a)[rows], (Yv - a)[rows]
+        w = np.clip(np.sum(d * e, axis=0) / np.sum(d * d, axis=0), 0, 1)   # one output a group
+        np.testing.assert_allclose(model.weights_[k - 1, :, 1], w, rtol=1e-9, atol=1e-12)
+        P = model.predict(Uv, Yv, mode="k_step", k=k)
+        np.testing.assert_allclose(P[rows], a[rows] + w * (c - a)[rows], rtol=0, atol=1e-10)
+
+
+def test_on_the_choosing_records_no_step_is_worse_than_a_component(blend):
+    model, _, (Uv, Yv) = blend
+    for k in range(1, 7):
+        rows = np.arange(model.t0 + k - 1, len(Yv))
+        sse = lambda m: np.sum((m.predict(Uv, Yv, mode="k_step", k=k)[rows]  # noqa: E731
+                                - Yv[rows]) ** 2, axis=0)
+        mine = sse(model)
+        for c in model.components_:
+            assert np.all(mine <= sse(c) * (1 + 1e-12)), k
+
+
+def test_modes_agree_and_the_file_round_trips(blend):
+    model, _, _ = blend
+    Ut, Yt = _plant(300, 3)
+    for k, rows, P in model.rollout(Ut, Yt, 9):      # beyond the weights' 6 steps: the last
+        np.testing.assert_allclose(P, model.predict(Ut, Yt, mode="k_step", k=k)[rows],
+                                   rtol=0, atol=1e-12)
+    np.testing.assert_allclose(model.predict(Ut, Yt, mode="one_step"),
+                               model.predict(Ut, Yt, mode="k_step", k=1), rtol=0, atol=1e-12)
+    free = model.predict(Ut, Yt, mode="free_run")
+    np.testing.assert_allclose(free[-1], model.predict(Ut, Yt, mode="k_step", k=298)[-1],
+                               rtol=0, atol=1e-10)
+    again = KStepBlend.from_dict(model.to_dict())
+    np.testing.assert_array_equal(again.predict(Ut, Yt, mode="k_step", k=4),
+                                  model.predict(Ut, Yt, mode="k_step", k=4))
+
+
+def test_bad_input_is_named(blend):
+    model, (U, Y), _ = blend
+    comps = model.components_
+    w = np.full((3, 2, 2), 0.5)
+    with pytest.raises(ValueError, match="components: none given"):
+        KStepBlend([])
+    with pytest.raises(ValueError, match="weights: each step's and output's weights"):
+        KStepBlend(comps, weights=np.full((3, 2, 2), 0.6))
+    with pytest.raises(ValueError, match=r"weights: expected \(steps, outputs, 2\)"):
+        KStepBlend(comps, weights=np.full((3, 2), 0.5))
+    with pytest.raises(ValueError, match="weights: 2 outputs, the components have 1"):
+        KStepBlend([ArxModel((1, 1, 1)).fit(U, Y[:, :1])] * 2, weights=w)
+    with pytest.raises(ValueError, match=r"components\[1\]: other inputs or outputs"):
+        KStepBlend([comps[0], ArxModel((1, 1, 1)).fit(U, Y[:, :1])])
+    with pytest.raises(ValueError, match="components: fit every component"):
+        KStepBlend([comps[0], ArxModel((1, 1, 1))]).choose(U, Y)
+    with pytest.raises(ValueError, match="weights: none"):
+        KStepBlend([ArxModel((1, 1, 1)), ArxModel((2, 1, 1))]).fit(U, Y)
+    with pytest.raises(ValueError, match=r"units: expected one label per row \(2000\)"):
+        KStepBlend(comps, groups=[0, 1]).choose(U, Y, units=[0, 1])
+    with pytest.raises(ValueError, match="groups: 3 labels for 2 outputs"):
+        KStepBlend(comps, weights=w, groups=[0, 1, 2])
