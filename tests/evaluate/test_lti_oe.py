@@ -54,3 +54,13 @@ def test_fit_rejects_bad_input():
         fit(2, False, [(u[:25], u[:25])])
     with pytest.raises(ValueError, match="NaN"):
         fit(2, False, [(np.full(100, np.nan), u)])
+
+
+def test_fitted_on_half_it_misses_the_other_half_but_not_pulses(emps):
+    # README: PULSES repeats DATA_EMPS's trajectory; the linear model fitted on the first half
+    # of DATA_EMPS simulates PULSES below the 6 mm target and the unseen second half far worse
+    d, p = emps
+    h = len(d["qm"]) // 2
+    m = Lti(fit(2, False, [(d["vir"][:h], d["qm"][:h])]), 2, False)
+    assert score(m, p["vir"], p["qm"]) < 6.0
+    assert score(m, d["vir"][h:], d["qm"][h:]) > 10.0
