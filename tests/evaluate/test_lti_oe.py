@@ -64,3 +64,20 @@ def test_fitted_on_half_it_misses_the_other_half_but_not_pulses(emps):
     m = Lti(fit(2, False, [(d["vir"][:h], d["qm"][:h])]), 2, False)
     assert score(m, p["vir"], p["qm"]) < 6.0
     assert score(m, d["vir"][h:], d["qm"][h:]) > 10.0
+
+
+def test_model_and_score_reject_bad_input(second_order):
+    from cdam_core.evaluate.lti_oe import blocks, emps_lti_baseline
+    x = np.zeros((100, 1))
+    with pytest.raises(ValueError, match="mode"):
+        second_order.predict(x, x, mode="one_step")
+    with pytest.raises(ValueError, match="U, Y"):
+        second_order.predict(x, x[:50])
+    with pytest.raises(ValueError, match="Y: needs"):
+        second_order.predict(x[:20], x[:20])
+    with pytest.raises(ValueError, match="u, y"):
+        score(second_order, x, x)
+    with pytest.raises(ValueError, match="n_blocks"):
+        blocks(1, 1000)
+    with pytest.raises(ValueError, match="orders"):
+        emps_lti_baseline(orders=(0, 2))

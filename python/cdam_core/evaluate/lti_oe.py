@@ -25,6 +25,8 @@ from scipy.signal import lfilter
 from cdam_core.evaluate.simulation import EMPS_PROTOCOL, simulation_score
 from cdam_core.record.realdata.emps import load_emps
 
+__all__ = ["Lti", "fit", "score", "blocks", "emps_lti_baseline"]
+
 N_INIT = EMPS_PROTOCOL["n_init"]
 MM = EMPS_PROTOCOL["scale"]
 
@@ -36,7 +38,7 @@ def _split(theta, n, offset):
     return a, b, c
 
 
-def simulate(theta, n, offset, u, y_window):
+def _simulate(theta, n, offset, u, y_window):
     """Free run of the model on input u from the state that best fits y_window (its first
     samples, least squares)."""
     a, b, c = _split(theta, n, offset)
@@ -52,7 +54,7 @@ def _free(a, b, zi, m):
     return lfilter(bb, a, np.zeros(m), zi=zi)[0]
 
 
-def arx_init(n, offset, segments):
+def _arx_init(n, offset, segments):
     """Least-squares ARX(n, n + 1, 0) coefficients (plus offset) over the segments."""
     rows, rhs = [], []
     for u, y in segments:
@@ -69,11 +71,7 @@ def arx_init(n, offset, segments):
     return th
 
 
-def stable(theta, n):
-    return np.all(np.abs(np.roots(np.concatenate([[1.0], theta[:n]]))) < 1.0 + 1e-9)
-
-
-def extend(theta, n, offset, n_new, offset_new):
+def _extend(theta, n, offset, n_new, offset_new):
     """The same transfer function written with n_new >= n poles (a pole and a zero at 0.5
     added per extra order), with the offset as a parameter (0) when offset_new."""
     a, b, c = _split(theta, n, offset)
@@ -104,7 +102,7 @@ def fit(n, offset, segments, warm=()):
         out = []
         for u, y in segments:
             with np.errstate(all="ignore"):
-                s = simulate(th, n, offset, u, y[:N_INIT])
+                s = _simulate(th, n, offset, u, y[:N_INIT])
             r = s - y
             if not np.all(np.isfinite(r)):
                 r = np.full_like(y, 1e3)
@@ -112,11 +110,11 @@ def fit(n, offset, segments, warm=()):
         return np.concatenate(out)
 
     best = None
-    starts = [arx_init(n, offset, segments)]
+    starts = [_arx_init(n, offset, segments)]
     # the poles of a rigid axis (1, 0.998^k), a small numerator
     pol = np.poly(np.r_[1.0, 0.998 * np.ones(n - 1)]) if n > 1 else np.poly([0.9999])
     starts.append(np.concatenate([pol[1:], 1e-6 * np.ones(n + 1), [0.0] if offset else []]))
-    starts += [extend(th, nw, ow, n, offset) for th, nw, ow in warm if nw <= n]
+    starts += [_extend(th, nw, ow, n, offset) for th, nw, ow in warm if nw <= n]
     for s in starts:
         r = least_squares(res, s, x_scale="jac", method="lm", max_nfev=400 * (len(s) + 1))
         cost = float(np.mean(r.fun ** 2))
@@ -133,17 +131,34 @@ class Lti:
         self.t0 = N_INIT
 
     def predict(self, U, Y, mode="free_run"):
-        u = np.asarray(U, float)[:, 0]
-        y = np.asarray(Y, float)[:, 0]
-        return simulate(self.theta, self.n, self.offset, u, y[:self.t0])[:, None]
+        """Free run on U (N, 1) from the state fitted to Y's first ``t0`` rows (the rest of Y
+        is not read)."""
+        U, Y = np.asarray(U, float), np.asarray(Y, float)
+        if mode != "free_run":
+            raise ValueError(f"mode: only 'free_run' is supported, got {mode!r}")
+        if U.ndim != 2 or Y.ndim != 2 or U.shape[1] != 1 or Y.shape[1] != 1 or len(U) != len(Y):
+            raise ValueError(f"U, Y: must be (N, 1) arrays of equal N, got {U.shape}, {Y.shape}")
+        if len(Y) <= self.t0:
+            raise ValueError(f"Y: needs more than {self.t0} rows, got {len(Y)}")
+        u, y = U[:, 0], Y[:, 0]
+        return _simulate(self.theta, self.n, self.offset, u, y[:self.t0])[:, None]
 
 
 def score(model, u, y):
+    """Simulation RMSE (mm) of ``model`` on input u, output y (1-D, m) under the EMPS protocol;
+    inf when the free run cannot run."""
+    u, y = np.asarray(u, float), np.asarray(y, float)
+    if u.ndim != 1 or u.shape != y.shape:
+        raise ValueError(f"u, y: must be 1-D of equal length, got {u.shape} and {y.shape}")
     sc = simulation_score(model, u[:, None], y[:, None], N_INIT, MM)
     return sc.rmse[0] if sc.status == "ok" else np.inf
 
 
 def blocks(n_blocks, N):
+    """``n_blocks`` contiguous (start, stop) ranges covering range(N)."""
+    if int(n_blocks) != n_blocks or n_blocks < 2 or N < n_blocks * (N_INIT + 11):
+        raise ValueError(f"n_blocks: must be an integer >= 2 with blocks longer than "
+                         f"{N_INIT + 10} samples, got {n_blocks} for {N} samples")
     e = np.linspace(0, N, n_blocks + 1).astype(int)
     return list(zip(e[:-1], e[1:]))
 
@@ -151,6 +166,9 @@ def blocks(n_blocks, N):
 def emps_lti_baseline(orders=(1, 2, 3, 4, 5), n_blocks=4, log=print):
     """The order search on DATA_EMPS's held-out blocks, the refit on all of it, the score on
     DATA_EMPS_PULSES: (model, PULSES RMSE mm, validation rows [(mean, n, offset, per block)])."""
+    if not orders or any(int(k) != k or k < 1 for k in orders):
+        raise ValueError(f"orders: must be integers >= 1, got {orders!r}")
+    orders = sorted(int(k) for k in orders)
     d, p = load_emps("DATA_EMPS"), load_emps("DATA_EMPS_PULSES")
     u, y = d["vir"], d["qm"]
     bl = blocks(n_blocks, len(y))
