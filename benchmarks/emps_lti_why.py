@@ -9,7 +9,8 @@ and scored under the protocol (20 samples of qm given) on DATA_EMPS_PULSES.
     modelled as a linear response to vir);
 (d) (b) plus a position force k q (what the linear model's pole above 1 amounts to).
 Run: python benchmarks/emps_lti_why.py (about a minute; with ``cv``: the held-out blocks,
-about 3 min; with ``halves``: each half of DATA_EMPS as training set)
+about 3 min; with ``halves``: each half of DATA_EMPS as training set;
+with ``forward``: the training window chosen by forward validation)
 """
 import numpy as np
 from scipy.optimize import least_squares
@@ -129,8 +130,33 @@ def halves():
                   f" mm, PULSES {score(m, p['vir'], p['qm']):.2f} mm", flush=True)
 
 
+def forward():
+    """Friction drifts over DATA_EMPS: forward validation (fit on the 1, 2 or all blocks before
+    a block of four, score that block) picks the training window; then each window at the end
+    of DATA_EMPS scored on PULSES."""
+    from cdam_core.evaluate.lti_oe import blocks
+    u, y = d["vir"], d["qm"]
+    bl = blocks(4, len(y))
+    for back in (1, 2, 3):
+        vals = []
+        for k in (2, 3):
+            s, e = bl[k]
+            a = bl[max(0, k - back)][0]
+            vals.append(score(fit_phys([(u[a:s], y[a:s])], False), u[s:e], y[s:e]))
+        print(f"forward validation, the last {back} block(s) before: "
+              + " ".join(f"{v:.2f}" for v in vals) + f" mean {np.mean(vals):.2f} mm", flush=True)
+    for back in (1, 2, 3, 4):
+        a = bl[4 - back][0]
+        g = fit_phys([(u[a:], y[a:])], False)
+        print(f"fitted on DATA_EMPS[{a}:]: PULSES {score(g, p['vir'], p['qm']):.2f} mm, "
+              f"params {np.round(g.th, 2)}", flush=True)
+
+
 if __name__ == "__main__":
     import sys
+    if sys.argv[1:] == ["forward"]:
+        forward()
+        sys.exit()
     if sys.argv[1:] == ["cv"]:
         held_out()
         sys.exit()
