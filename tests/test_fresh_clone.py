@@ -358,6 +358,8 @@ def test_emps_example_as_written_in_a_plain_clone(clone):
     windows = re.search(r"(\d\.\d\d s windows)", se).group(1)
     assert f"({'multiple shooting, ' + windows}) {rows[se]:.1f} mm" in text
     assert f"the published IDIM-LS model {rows['IDIM-LS (M, Fv, Fc, offset)']:.1f} mm" in text
+    lti = next(k for k in rows if k.startswith("LTI output error, order "))
+    assert f"reproduced here at {rows[lti]:.1f} mm" in text
     for name in ("LSTM", "RNN", "MLP FIR", "GRU"):
         assert f"{name} {rows[name]:g}" in text, name
     bench = json.loads((out / "benchmark.json").read_text())

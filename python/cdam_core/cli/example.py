@@ -57,6 +57,7 @@ def _emps_benchmark(sel, p: dict, out_dir: Path, ticker) -> None:
                 for (k, v), f in zip(sc.items(), (sel.declared, sel.final))]
         rows.append(_arx_baseline(p))
         rows.append(_simulation_error_baseline(sel, p))
+        rows.append(_lti_baseline())
     rows += list(EMPS_PUBLISHED)
     print(f"EMPS benchmark (train DATA_EMPS, test DATA_EMPS_PULSES, first "
           f"{EMPS_PROTOCOL['n_init']} samples of qm given, simulation RMSE of qm):")
@@ -87,6 +88,16 @@ def _simulation_error_baseline(sel, p: dict) -> tuple:
     return (f"M, Fv, Fc, offset fitted by simulation error on DATA_EMPS (multiple shooting, "
             f"{cv.horizon * cv.dt:.2f} s windows)",
             sc.rmse[0] if sc.status == "ok" else None, sc.reason or "this run")
+
+
+def _lti_baseline() -> tuple:
+    """The linear baseline fitted by simulation error (evaluate.lti_oe): a transfer function
+    from vir to qm, its order chosen on four held-out blocks of DATA_EMPS."""
+    from cdam_core.evaluate.lti_oe import emps_lti_baseline
+    m, te, table = emps_lti_baseline(log=lambda *a: None)
+    v = min(r[0] for r in table)
+    return (f"LTI output error, order {m.n}{' + input offset' if m.offset else ''} chosen on "
+            f"held-out blocks of DATA_EMPS (validation {v:.1f} mm)", te, "this run")
 
 
 def _arx_baseline(p: dict) -> tuple:
