@@ -4,7 +4,6 @@ at the default noise and at three times that noise; no effect -> no finding; two
 both found; a periodic force outside the library -> unexplained, no effect claimed."""
 from functools import lru_cache
 
-import numpy as np
 import pytest
 from test_residual_synth_data import flexible_joint_record, rigid_axis_record
 
