@@ -1,0 +1,84 @@
+"""Does a first-order actuation lag chosen from the training flights give the physics flight
+model a multi-step gain on a held-out trajectory type? (issue [flights] item 4, the residual
+loop's actuation effects). A measurement: `python benchmarks/nanodrone_lag.py [--json F]`.
+
+On the 17 nano-drone flights, the four-way cross-trajectory protocol (train on three types,
+test on the fourth; evaluate.crossfold's split): ``QuadPhysics`` with the rates integrated
+("dynamic") and held ("hold", the benchmark paper's physics model), each fitted on all
+training flights with lag 0 and with ``lag=None`` (the lag chosen on held-out time blocks of
+the training flights among 0..50 ms, models.flight.physics), scored k-step on every test
+flight at h = 1..50 on the same rows. Printed per fold: the chosen lag and delays, and per
+group RMSE at h = 1, 10, 25, 50 without / with the lag, and at how many of the 50 horizons
+the lag is lower; then the mean over the folds.
+"""
+import argparse
+import json
+import time
+
+import numpy as np
+
+from cdam_core.evaluate.crossfold import TYPES, _split
+from cdam_core.evaluate.groups import NANODRONE_GROUPS
+from cdam_core.evaluate.horizons import score_horizons
+from cdam_core.models.flight.physics import QuadPhysics
+from cdam_core.record.realdata.nanodrone import nanodrone_files
+
+SHOW = (1, 10, 25, 50)
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--json", default=None)
+    args = ap.parse_args()
+    files, loaded, out = nanodrone_files(), {}, {}
+    groups, hs = list(NANODRONE_GROUPS), list(range(1, 51))
+    names = [g.name for g in groups]
+    for test_type in TYPES:
+        t = time.time()
+        _, _, (_, _, st_train, st_test) = _split(files, test_type, loaded)
+        dt = float(np.median(np.diff(st_train.t)))
+        models = {}
+        for rates in ("dynamic", "hold"):
+            for lag in (0.0, None):
+                models[(rates, lag)] = QuadPhysics(dt=dt, rates=rates, lag=lag).fit(
+                    st_train.U, st_train.Y, segments=st_train.lengths)
+        first = max(m.t0 for m in models.values())
+        sc = {k: score_horizons(m, st_test.U, st_test.Y, st_test.outputs, hs,
+                                segments=st_test.lengths, free_run=False, groups=groups,
+                                first=first) for k, m in models.items()}
+        fold = {}
+        for rates in ("dynamic", "hold"):
+            m = models[(rates, None)]
+            r0 = sc[(rates, 0.0)].group_rmse["model"]
+            r1 = sc[(rates, None)].group_rmse["model"]
+            a0 = sc[(rates, 0.0)].group_mae["model"]
+            a1 = sc[(rates, None)].group_mae["model"]
+            fold[rates] = {"lag": m.lag_, "lag_fit": {str(k): v for k, v in m.lag_fit_.items()},
+                           "delays": list(m.delays_), "delays_lag0": list(models[(rates, 0.0)].delays_),
+                           "rmse_lag0": r0.tolist(), "rmse_lag": r1.tolist(),
+                           "mae_lag0": a0.tolist(), "mae_lag": a1.tolist(),
+                           "naive_rmse": sc[(rates, 0.0)].group_rmse["naive"].tolist()}
+            print(f"{test_type} {rates}: lag {1000 * m.lag_:.0f} ms (delays {m.delays_}, "
+                  f"lag 0: {models[(rates, 0.0)].delays_}); held-out scores "
+                  + " ".join(f"{1000 * k:.0f}:{v:.2f}" for k, v in m.lag_fit_.items()))
+            for g, name in enumerate(names):
+                row = " ".join(f"h{h} {r0[h - 1, g]:.4f}/{r1[h - 1, g]:.4f}" for h in SHOW)
+                wins = int(np.sum(r1[:, g] < r0[:, g]))
+                print(f"   {name:9s} RMSE lag0/lag {row}  lag lower at {wins}/50")
+        print(f"   ({time.time() - t:.0f} s)", flush=True)
+        out[test_type] = fold
+    for rates in ("dynamic", "hold"):
+        r0 = np.mean([out[k][rates]["rmse_lag0"] for k in TYPES], axis=0)
+        r1 = np.mean([out[k][rates]["rmse_lag"] for k in TYPES], axis=0)
+        print(f"mean over folds, {rates}:")
+        for g, name in enumerate(names):
+            row = " ".join(f"h{h} {r0[h - 1, g]:.4f}/{r1[h - 1, g]:.4f}" for h in SHOW)
+            print(f"   {name:9s} RMSE lag0/lag {row}  lag lower at "
+                  f"{int(np.sum(r1[:, g] < r0[:, g]))}/50")
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump({"groups": names, "folds": out}, fh, indent=1)
+
+
+if __name__ == "__main__":
+    main()
