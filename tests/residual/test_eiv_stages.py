@@ -228,13 +228,14 @@ def test_spurious_large_in_sample_gain_on_a_link_equation_is_not_claimed():
 
 
 def test_without_held_out_blocks_a_link_only_effect_is_not_claimed():
-    """Without held-out data the in-sample statistics cannot decide on an EIV equation (its
-    mismatch correlates with any velocity-shaped column): the friction the held-out blocks
-    confirm above is then not claimed, and a motor-side effect still can be."""
+    """Without held-out data nothing is claimed (the in-sample statistics cannot decide, on an
+    EIV equation least of all: its mismatch correlates with any velocity-shaped column): the
+    friction the held-out blocks confirm above is then not claimed, and the settings say
+    why."""
     m, sig = _prepared("link_friction")
     sel = select(m, sig, [CoulombFriction("tau_l")], free_run=False, estimator="idim-ls",
                  held_out=False)
-    assert sel.steps == []
+    assert sel.steps == [] and sel.settings["validation"]["status"] == "off"
 
 
 class _BoundedJoint(EIVJoint):

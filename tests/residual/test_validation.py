@@ -50,7 +50,7 @@ def test_bonferroni_level_is_alpha_over_the_structures_tried():
     assert v.to_json()["level"] == pytest.approx(0.0025)
 
 
-def test_too_short_a_record_says_so_and_the_statistics_decide():
+def test_too_short_a_record_says_so_and_nothing_is_claimed():
     rec = rigid_axis(fs=1000.0, duration=0.13, Fc=1.0, noise=1e-5)
     m, sig = _prepared(rec)
     with pytest.raises(ValueError, match="validation windows"):
@@ -58,6 +58,8 @@ def test_too_short_a_record_says_so_and_the_statistics_decide():
     sel = select(m, sig, [CoulombFriction("tau")], free_run=False)
     assert sel.settings["validation"]["status"] == "unavailable"
     assert "reason" in sel.settings["validation"]
+    # the Coulomb friction (1 N m) is in the record, but no held-out block can confirm it
+    assert sel.steps == [] and sel.settings["validation"]["decision"] == "too short to decide"
 
 
 def test_output_error_refinement_recovers_perturbed_parameters():

@@ -250,7 +250,12 @@ def _summary(js: dict) -> list[str]:
         out.append(f"  {k} {v:.5g} ({rel})")
     for f in js["findings"]:
         out.append(f"found {f['effect']} on {f['channel']}: {f['parameters']}")
-    if not js["findings"]:
+    val = st.get("validation") or {}
+    if not js["findings"] and val.get("status") == "unavailable":
+        out.append(f"no effect claimed: too short to decide ({val.get('reason', '')})")
+    elif not js["findings"] and val.get("status") == "off":
+        out.append("no effect claimed: held-out validation off")
+    elif not js["findings"]:
         out.append("no effect found")
     for u in js["unexplained"]:
         what = ("a periodic component the model's terms cannot produce"

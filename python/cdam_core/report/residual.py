@@ -211,7 +211,10 @@ def write_report(sel: Selection, out_dir, title: str | None = None, source: str 
               f"{100 * v['nrmse']:.2f} % |" for k, v in sel.declared_error.items()]
     lines += ["", "## Findings", ""]
     if not sel.steps:
-        lines += ["No candidate effect is significant.", ""]
+        val = sel.settings.get("validation") or {}
+        lines += [f"No effect claimed: {val['decision']} ({val.get('reason', '')})."
+                  if val.get("status") in ("unavailable", "off") and "decision" in val
+                  else "No candidate effect predicts held-out data better.", ""]
     for i, (st, fjs) in enumerate(zip(sel.steps, js["findings"])):
         png = f"finding_{i + 1}_{fjs['effect']}.png"
         _figure_finding(out / png, sel, i, units)

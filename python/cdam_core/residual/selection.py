@@ -2,16 +2,21 @@
 
 Each step fits every applicable candidate on top of the current model and ranks them by the
 error reduction ratio ERR = (SSE_current - SSE_candidate) / y'y (for one added regressor this
-is exactly FROLS's ERR of the orthogonalised regressor). A candidate counts only if it is
-significant: an F-test on its added parameters at level ``alpha`` using the effective sample
-size N_eff = N / tau_int of the candidate model's residual (diagnostics.effective_sample_size),
-and BIC computed on N_eff must fall. The best significant candidate is added, the model is
-re-estimated, and the loop repeats until the residual is white (Ljung-Box) or nothing is
-significant. The statistics are taken over the equations the candidate changes (so a small
-joint-torque equation is not drowned in the force equations of a flight model). A backward pass
-then re-tests every claimed effect with all the others present and drops those no longer
-significant (``Selection.removed``). Structure left over (spectral peaks) is reported as
-``unexplained``.
+is exactly FROLS's ERR of the orthogonalised regressor) and screens them by an F-test on the
+added parameters at level ``alpha`` on the effective sample size N_eff = N / tau_int of the
+candidate model's residual (diagnostics.effective_sample_size), over the equations the candidate
+changes (so a small joint-torque equation is not drowned in the force equations of a flight
+model). The decision is taken on held-out time blocks (:mod:`cdam_core.residual.validation`):
+the screened candidate that predicts them significantly better (one-sided paired Wilcoxon,
+Bonferroni over the candidates tried) is added, the model is re-estimated, and the loop repeats
+until the residual is white (Ljung-Box) or nothing predicts better. A backward pass then
+re-tests every claimed effect with all the others present and drops those no longer better
+(``Selection.removed``). Structure left over (spectral peaks) is reported as ``unexplained``.
+
+Without held-out blocks no effect is claimed (:func:`select`, "too short to decide"): no share
+of the in-sample residual an effect removes is a valid substitute (a fixed gate, 1 % or 5 %,
+was tuned to records: with 10^4 samples a negligible mismatch is "significant" in-sample, while
+on a short record a spurious column removes several percent).
 """
 from __future__ import annotations
 
@@ -42,13 +47,7 @@ class Candidate:
     n_eff: float
     tau_int: float
 
-    gain: float = 0.0   # (SSE_current - SSE_candidate) / SSE_current
-
-    @property
-    def significant(self) -> bool:
-        """The equation-error statistics alone (used when held-out validation is unavailable)."""
-        return bool(self.pvalue < self._alpha and self.dbic < 0 and self.gain >= self._min_gain
-                    and self._in_sample_ok)
+    gain: float = 0.0   # (SSE_current - SSE_candidate) / SSE_current (reported, not a gate)
 
     @property
     def screened(self) -> bool:
@@ -56,8 +55,6 @@ class Candidate:
         return bool(self.pvalue < self._alpha)
 
     _alpha: float = 0.01
-    _min_gain: float = 0.01
-    _in_sample_ok: bool = True   # False: only errors-in-variables equations change (compare)
 
 
 @dataclass
@@ -134,8 +131,7 @@ def _changed_equations(current: Fit, f1: Fit, eff, model) -> list:
     return out or list(f1.residuals)
 
 
-def compare(model, sig, current: Fit, f1: Fit, eff, alpha: float = 0.01,
-            min_gain: float = 0.01) -> Candidate:
+def compare(model, sig, current: Fit, f1: Fit, eff, alpha: float = 0.01) -> Candidate:
     """Test ``f1`` (= ``current`` + ``eff``) against ``current`` on the equations ``eff`` changes:
     ERR, an F-test on the effective sample size and BIC on it (module docstring)."""
     eqs = _changed_equations(current, f1, eff, model)
@@ -162,26 +158,15 @@ def compare(model, sig, current: Fit, f1: Fit, eff, alpha: float = 0.01,
                   float(n_eff), float(tau))
     c._alpha = alpha
     c.gain = gain / sse0 if sse0 > 0 else 0.0
-    c._min_gain = min_gain
-    eiv = set(getattr(model, "eiv_equations", ()))
-    # only errors-in-variables equations: the in-sample statistics do not decide (the mismatch
-    # of such an equation correlates with any velocity-shaped column); held-out data do
-    c._in_sample_ok = not (eiv and set(eqs) <= eiv)
     c.equations = eqs
     return c
 
 
-def evaluate(model, sig, current: Fit, eff, alpha: float = 0.01, trim: int = 50,
-             min_gain: float = 0.01) -> Candidate:
-    """Fit ``current`` + ``eff`` and test it (ERR, F-test on N_eff, BIC on N_eff).
-
-    ``min_gain``: the smallest share of the current residual sum of squares (over the
-    equations the effect changes) an effect must remove to be claimed (1 %): with 10^4
-    samples a model mismatch far below any practical interest (derivative-filter bias,
-    integration error) is otherwise "significant".
-    """
+def evaluate(model, sig, current: Fit, eff, alpha: float = 0.01, trim: int = 50) -> Candidate:
+    """Fit ``current`` + ``eff`` and screen it (ERR, F-test on N_eff, BIC on N_eff); the
+    decision is the held-out one (:func:`select`)."""
     eff, f1 = _fit_with(model, sig, current.effects, eff, trim, current)
-    return compare(model, sig, current, f1, eff, alpha, min_gain)
+    return compare(model, sig, current, f1, eff, alpha)
 
 
 def _requirements_met(eff, effects) -> bool:
@@ -208,14 +193,18 @@ def _errors(f: Fit, sig_fr, free_run: bool, substeps, store=None, label=""):
 
 
 def backward(model, sig, current: Fit, protected=(), alpha: float = 0.01, trim: int = 50,
-             min_gain: float = 0.01, cv=None) -> tuple[Fit, list]:
+             cv=None) -> tuple[Fit, list]:
     """Backward elimination: re-test every claimed effect with all the others in the model
-    (the reduced model re-estimated without it); drop the least significant one that fails,
-    repeat. With ``cv`` (a :class:`~cdam_core.residual.validation.BlockedCV`) the test is the
-    held-out one (Bonferroni over the claimed effects); without, the equation-error statistics.
-    ``protected``: keys that are never dropped (declared effects). Returns the final fit and
-    ``[{"effect", "channel", "p_value", ...}]`` of the dropped ones."""
+    (the reduced model re-estimated without it); drop the one with the largest p-value that
+    fails, repeat. The test is the held-out one of ``cv`` (a
+    :class:`~cdam_core.residual.validation.BlockedCV`; Bonferroni over the claimed effects).
+    Without ``cv`` nothing is tested or dropped (no effect is claimed without held-out data,
+    :func:`select`; there is no in-sample gate to apply instead). ``protected``: keys that are
+    never dropped (declared effects). Returns the final fit and
+    ``[{"effect", "channel", "p_value", "validation"}]`` of the dropped ones."""
     removed = []
+    if cv is None:
+        return current, removed
     while True:
         claimed = [e for e in current.effects if e.key not in protected]
         worst = None
@@ -223,16 +212,9 @@ def backward(model, sig, current: Fit, protected=(), alpha: float = 0.01, trim: 
             others = tuple(x for x in current.effects if x is not e)
             if any(e.name in o.requires and o.channel == e.channel for o in others):
                 continue   # asymmetric friction needs its Coulomb term: test them in that order
-            if cv is not None:
-                v = cv.compare((others, model), (current.effects, model), len(claimed), alpha)
-                if not v.better and (worst is None or v.p_value > worst[1]):
-                    worst = (e, v.p_value, {"validation": v.to_json()})
-                continue
-            reduced = fit(model, sig, others, trim, current)
-            c = compare(model, sig, reduced, current, e, alpha, min_gain)
-            if not c.significant and (worst is None or c.pvalue > worst[1]
-                                      or (c.pvalue == worst[1] and c.gain < worst[2]["sse_share_removed"])):
-                worst = (e, c.pvalue, {"sse_share_removed": c.gain, "delta_bic": c.dbic})
+            v = cv.compare((others, model), (current.effects, model), len(claimed), alpha)
+            if not v.better and (worst is None or v.p_value > worst[1]):
+                worst = (e, v.p_value, {"validation": v.to_json()})
         if worst is None:
             return current, removed
         e, pval, info = worst
@@ -258,6 +240,10 @@ def drop_unsupported_terms(model, sig, current: Fit, cv, alpha: float, trim: int
             current = fit(model, sig, current.effects, trim)
     return model, current, dropped
 
+
+# what the selection does without held-out windows (select's docstring says why)
+NO_DECISION = ("no effect claimed and no declared term dropped (a split into two halves leaves no training rows once the filter's guard is removed; "
+               "in-sample statistics would need a fixed gain gate)")
 
 ESTIMATORS = {"iv": "IDIM-IV", "oe": "output error (multiple shooting)"}
 # the ``estimator`` argument: "auto" chooses on held-out windows, the others force one
@@ -326,8 +312,7 @@ def _choose_estimator(model, sig, current: Fit, cv, alpha: float, trim: int,
 def select(model, sig: dict, candidates, alpha: float = 0.01, max_steps: int | None = None,
            trim: int | None = None, free_run: bool = True, validation: dict | None = None,
            substeps: int | None = None, lags: int = 25, min_prominence: float = 1.0,
-           spectrum_seconds: float = 0.25, min_gain: float | None = None,
-           declared_effects=(), held_out: bool = True, keep_terms=(),
+           spectrum_seconds: float = 0.25, declared_effects=(), held_out: bool = True, keep_terms=(),
            estimator: str = "auto") -> Selection:
     """Run the stepwise selection on the prepared signals ``sig``.
 
@@ -342,9 +327,17 @@ def select(model, sig: dict, candidates, alpha: float = 0.01, max_steps: int | N
     (:mod:`cdam_core.residual.validation`): candidates that pass the F-test screen are tried on
     held-out windows, the best one that predicts them significantly better (Bonferroni over the
     candidates tried) is added; the backward pass and the declared model's optional terms
-    (``keep_terms`` excepted) are tested the same way. When the record is too short for it (or
-    with ``held_out=False``) the equation-error statistics decide (F-test, BIC and
-    ``min_gain`` on the effective sample size), as the settings state. ``estimator``: "auto"
+    (``keep_terms`` excepted) are tested the same way. When the record is too short for the
+    held-out windows (or with ``held_out=False``) no effect is claimed and no declared term
+    dropped; ``settings["validation"]`` says so, with the reason ("too short to decide"). Why
+    not a fallback: in-sample statistics need a gate on the share of the residual an effect
+    removes (the 1 % and 5 % used until session 8 were tuned to records), and a split of the
+    record into two halves (fit on one, score the other) is never possible where the blocks are
+    not: the blocks fail only when the ``trim`` edges leave fewer than
+    :data:`~cdam_core.residual.validation.MIN_WINDOWS` windows, roughly below 2.7 ``trim``
+    samples, and a half of such a record holds no training row once ``trim`` guard samples
+    are removed beside the held-out half (the zero-phase filter mixes them) and ``trim`` at the
+    record's end. ``estimator``: "auto"
     (default) tries IDIM-IV and the output-error refinement of the final model
     (:mod:`.instrumental`, :mod:`.output_error`) and keeps one only if it predicts held-out
     windows better than IDIM-LS; "idim-ls" keeps IDIM-LS without trying them (cheaper);
@@ -357,8 +350,6 @@ def select(model, sig: dict, candidates, alpha: float = 0.01, max_steps: int | N
                          f"got {estimator!r}")
     if max_steps is None:
         max_steps = getattr(model, "max_steps", 5)
-    if min_gain is None:   # 1 %; the flight models 5 % (see flight_models.Quadrotor.min_gain)
-        min_gain = getattr(model, "min_gain", 0.01)
     if int(max_steps) < 0:
         raise ValueError(f"max_steps: must be >= 0, got {max_steps}")
     if trim is None:
@@ -381,7 +372,7 @@ def select(model, sig: dict, candidates, alpha: float = 0.01, max_steps: int | N
         set_equation_weights(sig, declared)
         declared = fit(model, sig, declared.effects, trim)
     current = declared
-    cv, cv_info = None, {"status": "off"}
+    cv = None
     if held_out:
         try:
             # the flight models' windows only decide the criterion: the model kind's Euler
@@ -391,12 +382,15 @@ def select(model, sig: dict, candidates, alpha: float = 0.01, max_steps: int | N
             cv_info = {"status": "ok", **cv.describe()}
         except ValueError as exc:
             cv_info = {"status": "unavailable", "reason": str(exc),
-                       "instead": "equation-error statistics (F-test, BIC, min_gain)"}
+                       "decision": "too short to decide", "instead": NO_DECISION}
+    else:
+        cv_info = {"status": "off", "reason": "held-out validation switched off (held_out=False)",
+                   "decision": "not decided", "instead": NO_DECISION}
     err_current = _errors(declared, sig_fr, free_run, substeps, store, "declared")
     declared_error = dict(err_current)
     steps = []
     fs = 1.0 / sig["dt"]
-    for _ in range(int(max_steps)):
+    for _ in range(int(max_steps) if cv is not None else 0):
         if all(dg.whiteness(r, lags)["white"] for r in current.residuals.values()):
             break
         have = {e.key for e in current.effects}
@@ -405,18 +399,14 @@ def select(model, sig: dict, candidates, alpha: float = 0.01, max_steps: int | N
                 and _requirements_met(e, current.effects)]
         if not pool:
             break
-        ranked = sorted((evaluate(model, sig, current, e, alpha, trim, min_gain) for e in pool),
+        ranked = sorted((evaluate(model, sig, current, e, alpha, trim) for e in pool),
                         key=lambda c: -c.err)
-        held = None
-        if cv is not None:
-            screened = [c for c in ranked if c.screened]
-            tried = [(c, cv.compare((current.effects, None), (c.fit.effects, None),
-                                    len(screened), alpha)) for c in screened]
-            passing = [cv_ for cv_ in tried if cv_[1].better]
-            best, held = min(passing, key=lambda cv_: cv_[1].score_rich) if passing \
-                else (None, None)
-        else:
-            best = next((c for c in ranked if c.significant), None)
+        screened = [c for c in ranked if c.screened]
+        tried = [(c, cv.compare((current.effects, None), (c.fit.effects, None),
+                                len(screened), alpha)) for c in screened]
+        passing = [cv_ for cv_ in tried if cv_[1].better]
+        best, held = min(passing, key=lambda cv_: cv_[1].score_rich) if passing \
+            else (None, None)
         if best is None:
             break
         ch = best.effect.display_equation(current.residuals)
@@ -434,12 +424,11 @@ def select(model, sig: dict, candidates, alpha: float = 0.01, max_steps: int | N
             "runner_up": ({"effect": ranked[1].effect.key, "err": ranked[1].err,
                            "p_value": ranked[1].pvalue} if len(ranked) > 1 else None),
         }
-        if held is not None:
-            evidence["validation"] = held.to_json()
+        evidence["validation"] = held.to_json()
         steps.append(Step(best, current, err_current, err_after, evidence,
                           [(c.effect.key, c.err, c.pvalue, c.dbic) for c in ranked]))
         current, err_current = best.fit, err_after
-    current, removed = backward(model, sig, current, dkeys, alpha, trim, min_gain, cv)
+    current, removed = backward(model, sig, current, dkeys, alpha, trim, cv)
     if removed:
         gone = {(r["effect"], r["channel"]) for r in removed}
         steps = [st for st in steps if (st.candidate.effect.name, st.candidate.effect.channel)
@@ -480,7 +469,7 @@ def select(model, sig: dict, candidates, alpha: float = 0.01, max_steps: int | N
                 "validation": cv_info, "declared_terms_dropped": dropped_terms,
                 "estimator": chosen,
                 "residual_structure_explained_by_the_model": at_model,
-                "alpha": alpha, "min_gain": min_gain, "trim": trim, "lags": lags, "min_prominence_decades": min_prominence,
+                "alpha": alpha, "trim": trim, "lags": lags, "min_prominence_decades": min_prominence,
                 "candidates": [c.key for c in candidates]}
     eiv = [e for e in getattr(model, "eiv_equations", ()) if e in current.residuals]
     if eiv:   # estimation.stage_split: the errors-in-variables equations' second stage

@@ -206,7 +206,6 @@ class GreyBoxModel:
     auto_estimators = ("iv", "oe")
     default_cutoff_hz = 100.0
     max_steps = 5
-    min_gain = 0.01   # smallest share of the residual SSE an effect must remove to be claimed
 
     def equation_filter(self, eq: str, s: dict) -> DerivativeFilter:
         """The parallel filter of equation ``eq``: the lowest of the positions' derivative

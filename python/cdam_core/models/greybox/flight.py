@@ -62,8 +62,8 @@ residual variance on it), one-sided paired Wilcoxon, Bonferroni over the candida
 that changes only link equations is decided the same way (there is no separate gain gate):
 the mismatch of the link equations correlates in-sample with any velocity-shaped column, but a
 column that only fits that mismatch on the training blocks does not lower it on the held-out
-block. Without held-out windows (a record too short for them) an effect that changes only
-errors-in-variables equations is not claimed (the in-sample F-test is not valid there).
+block. Without held-out windows (a record too short for them) no effect is claimed, as for
+the axis models (:func:`cdam_core.residual.selection.select`: "too short to decide").
 """
 from __future__ import annotations
 
@@ -119,10 +119,6 @@ class Quadrotor(GreyBoxModel):
     # the open-loop body windows drift (770x the hold-last error on the README's flight)
     auto_estimators = ("iv",)
     max_steps = 8
-    # The declared flight model leaves a few percent of structured mismatch (Euler rates for
-    # body rates, the arm's yaw inertia, rotor-torque terms); a 10 ms rotor "delay" absorbed
-    # 3.5 % of it on a clean flight, so a claim must remove at least 5 % of the residual.
-    min_gain = 0.05
     free_run_window = 1.0   # s; see freerun.free_run_error
     friction_width_search = True   # coulomb_friction searches its tanh width (effects.py)
     # the four rotor commands reach the rotors through the same ESCs: one shared delay
