@@ -109,3 +109,14 @@ def test_held_out_off_claims_nothing_and_says_so():
     assert sel.steps == [] and sel.settings["validation"]["status"] == "off"
     js = {"model": "rigid_axis", "settings": sel.settings, "findings": [], "unexplained": []}
     assert "no effect claimed: held-out validation off" in _summary(js)
+
+
+def test_a_record_shorter_than_the_whiteness_test_is_refused_by_name():
+    """100 samples leave 0 after the 50 trimmed at each edge: a ValueError naming the record
+    and the counts (it was 'lags: must be in 1..19, got 25' from inside the Ljung-Box test)."""
+    import pytest
+    t, u, w, q = _axis(1000.0, 0.1)
+    m, sig = _prepared(t, u, q, {"w": w}, 100.0)
+    with pytest.raises(ValueError, match=r"^record: 100 samples leave 0 after the 50 trimmed"):
+        select(m, sig, [ExternalForce(channel="tau", column="w")], free_run=False,
+               estimator="idim-ls")

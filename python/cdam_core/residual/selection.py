@@ -355,6 +355,12 @@ def select(model, sig: dict, candidates, alpha: float = 0.01, max_steps: int | N
     if trim is None:
         ts = getattr(model, "trim_seconds", None)
         trim = 50 if ts is None else max(50, int(round(ts / sig["dt"])))
+    n_rows = int(np.asarray(sig["t"]).size)
+    if n_rows - 2 * int(trim) <= int(lags):
+        raise ValueError(f"record: {n_rows} samples leave {max(n_rows - 2 * int(trim), 0)} "
+                         f"after the {int(trim)} trimmed at each edge; the residual's whiteness "
+                         f"test needs more than {int(lags)}: a record this short cannot be "
+                         "analysed")
     declared_effects = tuple(declared_effects)
     for c in tuple(candidates) + declared_effects:
         if not c.applies_to(model):
