@@ -465,3 +465,19 @@ def assert_float32_overflow_refused(model, tmp_path, array_name):
     assert main(["export-firmware", str(tmp_path / "big.json"), "-o",
                  str(tmp_path / "m.hpp")]) == 2
     assert not (tmp_path / "m.hpp").exists()
+
+
+def cli_check_report(path, out, build_dir, kind, hostile):
+    """`cdam firmware check MODEL --json OUT` on the default record: exit 0, the report's kind
+    and steps (the record's rows after the model's t0), and nothing of the file's text (the
+    ``hostile`` string it carries, the inputs' names) in the report. Returns the report."""
+    import json
+
+    from cdam_core.cli.main import main
+    from cdam_core.models.file import load_model
+    assert main(["firmware", "check", str(path), "--json", str(out),
+                 "--build-dir", str(build_dir)]) == 0
+    rep = json.loads(out.read_text())
+    assert rep["kind"] == kind and rep["steps"] == 1000 - load_model(path).t0
+    assert hostile not in json.dumps(rep) and "rotor_speed" not in json.dumps(rep)
+    return rep

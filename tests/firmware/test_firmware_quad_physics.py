@@ -37,7 +37,7 @@ from cdam_core.record.realdata import shared_data_dir
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _kinds import QUAD_N_FIT as N_FIT, quad_physics_file, quad_twin32  # noqa: E402
 from _kinds import header_array as _array, header_int as _int  # noqa: E402
-from _kinds import assert_float32_overflow_refused, nanodrone_flight  # noqa: E402
+from _kinds import assert_float32_overflow_refused, cli_check_report, nanodrone_flight  # noqa: E402,E501
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "models"))
 
@@ -177,13 +177,9 @@ def test_rates_held_as_the_benchmark_paper(quad, tmp_path):
 def test_cli_check_on_the_default_record(quad, bdir, tmp_path):
     path, _, _ = quad
     out = tmp_path / "rep.json"
-    assert main(["firmware", "check", str(path), "--json", str(out),
-                 "--build-dir", str(bdir)]) == 0
-    rep = json.loads(out.read_text())
-    assert rep["kind"] == "quad_physics" and rep["steps"] == 1000 - load_model(path).t0
+    rep = cli_check_report(path, out, bdir, "quad_physics", HOSTILE)
     # one step from the model's own trajectory near hover: rounding level of each state
     assert rep["max_rel_error"] <= 1e-5
-    assert HOSTILE not in json.dumps(rep) and "rotor_speed" not in json.dumps(rep)
 
 
 @pytest.mark.slow
