@@ -16,5 +16,11 @@ tail -n 3 build/ctest-run.log
 echo "== C++ unit tests and a hypothesis pass over _core under AddressSanitizer + UBSan"
 bash scripts/sanitize.sh
 echo "== Python tests (pytest)"
-# run from tests/ so that the installed cdam_core (not the source tree) is imported
-.venv/bin/python -m pytest -m "not fuzz and not soak" -q -rs --durations=30 -p no:cacheprovider "$@" tests   # -rs: why each skip; the 30 slowest (CI budget)
+# Two workers (the machine's two cores), one test file per worker at a time (--dist loadfile:
+# a file's module fixtures build once); then the wall-clock load tests (marked realtime) alone.
+# -rs: why each skip; --durations: the slowest (CI budget).
+.venv/bin/python -m pytest -m "not fuzz and not soak and not realtime" -n 2 --dist loadfile \
+  -q -rs --durations=30 -p no:cacheprovider "$@" tests
+echo "== Python wall-clock load tests (pytest -m realtime, alone on the machine)"
+.venv/bin/python -m pytest -m "realtime and not fuzz and not soak" -q -rs -p no:cacheprovider \
+  "$@" tests || [ $? -eq 5 ]   # 5: none selected (arguments that pick other tests)

@@ -112,11 +112,13 @@ def _link(tmp_path, rate, seconds, suffix=".log"):
     np.testing.assert_array_equal(seq, np.arange(n))
 
 
+@pytest.mark.realtime
 def test_link_10k_frames_per_second_short(tmp_path):
     _link(tmp_path, rate=10_000, seconds=2.0)
 
 
 @pytest.mark.slow
+@pytest.mark.realtime
 def test_link_10k_frames_per_second_60s(tmp_path):
     _link(tmp_path, rate=10_000, seconds=60.0)
 
@@ -171,6 +173,7 @@ def test_sigkill_leaves_log_readable_to_100ms_before_kill(tmp_path, suffix):
 
 
 @pytest.mark.slow
+@pytest.mark.realtime
 @pytest.mark.parametrize("suffix", [".log", ".blf"])
 def test_sigkill_at_10k_frames_per_second(tmp_path, suffix):
     _kill(tmp_path, suffix, rate=10_000)
