@@ -343,9 +343,10 @@ namespace kernel {
 // float: lm_tiles, each slice's float sums added into double). Double (CDAM_FB_DOUBLE): S
 // double, 4 lanes, SLICE 32.
 // A macro, not a template: a template (the hooks as an always-inlined policy class) gave the
-// same results bit for bit but other register allocation and code placement, and measured
-// 3-9 % slower on the double gradient pass (kernels9, session 9); the macro expands to the
-// same instructions as the two former bodies. Left defined for kernels_f32.hpp (which
+// same results bit for bit but other register allocation and code placement, and the double
+// gradient pass 4-7 % slower (mlp_mse_gradient at 10,000 x 6-20-8, best of 7: 1.17-1.23
+// against 1.13-1.15 ms, A/B interleaved, load 2; session 9); with the macro the extension
+// builds to the same bytes as with the two former bodies. Left defined for kernels_f32.hpp (which
 // undefines it, as CDAM_OUTPUT_ERRORS and CDAM_FB_ARGS).
 #define CDAM_FB_BODY(S, VEC, LANES, ACT_VECTOR, ACT_BLOCK, ADD_PRODUCTS, SLICE)               \
   for (Index s = 0; s < nb; ++s) {                                                            \
