@@ -272,130 +272,149 @@ namespace kernel {
 // sum z_l z_l' d_j d_j' use the symmetry in the inputs and in the hidden units separately: per
 // slice of samples the products w = d_j d_j' (j >= j', hw rows, the pairs j (j + 1) / 2 + j', zero
 // rows up to hw) and u = z_l z_l' (l >= l', nu rows, pairs l (l + 1) / 2 + l', z_{nz-1} = 1)
-// are formed in buf (ld hw + nu, kPairSlice columns) and Kh (hw x nu, leading dimension ldh) +=
+// are formed in buf (ld hw + nu, SLICE columns) and Kh (hw x nu, leading dimension ldh) +=
 // w u^T by the dense 8 x 4 tiles: h (h + 1) / 2 (i + 1) (i + 2) / 2 multiply-adds a sample (5,880
 // for 6-20-8) with no triangle waste, against 6,720 for the lower triangles of the h x h blocks.
 // The rest as in CDAM_JTJ_BODY, into K (ha x (P + ha), leading dimension ldk, P = nz hs):
 // columns 0 .. P - 1 receive sum [a; 1] v^T (the C blocks, the row sums of v in row h), columns
-// P .. P + ha - 1 the lower triangle of sum [a; 1] [a; 1]^T (R). d is V's block nz - 1 (z_{nz-1} = 1, so v_{nz-1} = d); the
-// inputs z_l (l < nz - 1) are X[l + s ldx].
-#define CDAM_JTJR_BODY                                                                       \
-  typedef double v4d __attribute__((vector_size(32)));                                       \
-  const Index P = nz * hs, ldb = hw + nu, hp = h * (h + 1) / 2;                              \
-  const double* Dv = V + (nz - 1) * hs;                                                      \
-  for (Index s0 = 0; s0 < nb; s0 += kPairSlice) {                                            \
-    const Index ns = nb - s0 < kPairSlice ? nb - s0 : kPairSlice;                            \
-    for (Index s = 0; s < ns; ++s) {                                                         \
-      const double* d = Dv + (s0 + s) * ldv;                                                 \
-      const double* x = X + (s0 + s) * ldx;                                                  \
-      double* w = buf + s * ldb;                                                             \
-      /* whole 4-vectors: row j's last store may run up to 3 values into row j + 1 (written  \
-         next), the padding or u (both written after); d is read within its padded block */ \
-      for (Index j = 0; j < h; ++j) {                                                        \
-        const double dj = d[j];                                                              \
-        double* wj = w + j * (j + 1) / 2;                                                    \
-        for (Index j2 = 0; j2 <= j; j2 += 4) {                                               \
-          v4d dv;                                                                            \
-          std::memcpy(&dv, d + j2, sizeof dv);                                               \
-          dv *= dj;                                                                          \
-          std::memcpy(wj + j2, &dv, sizeof dv);                                              \
-        }                                                                                    \
-      }                                                                                      \
-      for (Index q = hp; q < hw; ++q) w[q] = 0.0;                                            \
-      double* u = w + hw;                                                                    \
-      Index q = 0;                                                                           \
-      for (Index l = 0; l < nz; ++l) {                                                       \
-        const double zl = l + 1 < nz ? x[l] : 1.0;                                           \
-        for (Index l2 = 0; l2 <= l; ++l2) u[q++] = zl * (l2 + 1 < nz ? x[l2] : 1.0);         \
-      }                                                                                      \
-      for (; q < nu; ++q) u[q] = 0.0;                                                        \
-    }                                                                                        \
-    tiles(Kh, ldh, buf, buf + hw, ldb, hw, nu, ns, false, 1.0);                              \
-    const double* Vs = V + s0 * ldv;                                                         \
-    tiles(K, ldk, Vs + P, Vs, ldv, ha, P, ns, false, 1.0);                                   \
-    tiles(K + P * ldk, ldk, Vs + P, Vs + P, ldv, ha, ha, ns, true, 1.0);                     \
+// P .. P + ha - 1 the lower triangle of sum [a; 1] [a; 1]^T (R). d is V's block nz - 1
+// (z_{nz-1} = 1, so v_{nz-1} = d); the inputs z_l (l < nz - 1) are X[l + s ldx].
+// One body for double (S double, VEC 4 doubles, SLICE kPairSlice, CDAM_JTJR_DOUBLE) and float
+// (kernels_f32.hpp: 8 floats, SLICE kLmSlice): ADD_PRODUCTS(G, ldg, X, W, ldv, R, C, ns, lower)
+// as in CDAM_FB_BODY (double: tiles; float: lm_tiles). Left defined for kernels_f32.hpp (which
+// undefines it).
+#define CDAM_JTJR_BODY(S, VEC, LANES, ADD_PRODUCTS, SLICE)                                    \
+  const Index P = nz * hs, ldb = hw + nu, hp = h * (h + 1) / 2;                               \
+  const S* Dv = V + (nz - 1) * hs;                                                            \
+  for (Index s0 = 0; s0 < nb; s0 += SLICE) {                                                  \
+    const Index ns = nb - s0 < SLICE ? nb - s0 : SLICE;                                       \
+    for (Index s = 0; s < ns; ++s) {                                                          \
+      const S* d = Dv + (s0 + s) * ldv;                                                       \
+      const S* x = X + (s0 + s) * ldx;                                                        \
+      S* w = buf + s * ldb;                                                                   \
+      /* whole LANES-vectors: row j's last store may run up to LANES - 1 values into the     \
+         rows after it (written next), the padding or u (written after), in float (8 lanes)   \
+         also into the next sample (written after) or the buffer's slack past the last; d is  \
+         read within its padded block */                                                      \
+      for (Index j = 0; j < h; ++j) {                                                         \
+        const S dj = d[j];                                                                    \
+        S* wj = w + j * (j + 1) / 2;                                                          \
+        for (Index j2 = 0; j2 <= j; j2 += LANES) {                                            \
+          VEC dv;                                                                             \
+          std::memcpy(&dv, d + j2, sizeof dv);                                                \
+          dv *= dj;                                                                           \
+          std::memcpy(wj + j2, &dv, sizeof dv);                                               \
+        }                                                                                     \
+      }                                                                                       \
+      for (Index q = hp; q < hw; ++q) w[q] = S(0);                                            \
+      S* u = w + hw;                                                                          \
+      Index q = 0;                                                                            \
+      for (Index l = 0; l < nz; ++l) {                                                        \
+        const S zl = l + 1 < nz ? x[l] : S(1);                                                \
+        for (Index l2 = 0; l2 <= l; ++l2) u[q++] = zl * (l2 + 1 < nz ? x[l2] : S(1));         \
+      }                                                                                       \
+      for (; q < nu; ++q) u[q] = S(0);                                                        \
+    }                                                                                         \
+    ADD_PRODUCTS(Kh, ldh, buf, buf + hw, ldb, hw, nu, ns, false);                             \
+    const S* Vs = V + s0 * ldv;                                                               \
+    ADD_PRODUCTS(K, ldk, Vs + P, Vs, ldv, ha, P, ns, false);                                  \
+    ADD_PRODUCTS(K + P * ldk, ldk, Vs + P, Vs + P, ldv, ha, ha, ns, true);                    \
   }
+
 
 // The gradient pass of LM (normal_equations.hpp modes 1 and 2) over one block of nb samples,
 // one sample a column (X: i x nb, leading dimension i; T: m x nb, leading dimension m), in
-// place of Eigen's small products. The weights come zero-padded (W1p hs x i, b1p hs, W2p me x h,
-// b2p me, W2tp = W2' hs x m, each column a whole number of 4-vectors), so every sum runs in a
-// register over whole vectors of hidden units or outputs: a = act(W1 x + b1) for every sample
-// into A (hs x nb), the activation over the block, then per sample y = W2 a + b2, e = t - y,
-// sse += e'e, g = (W2' e) .* d (d = act'(a)), written into V's column (leading dimension ldv):
-// a at row pa (h rows; row pa + h holds 1), e at pe (me), g at pg (hs), x at pz (row pz + i
-// holds 1; the constant and padding rows are the caller's), and with full (mode 2) the fused
-// layout's v_l = d x_l at rows l hs (l < i) and d at i hs (their padding rows get values that are
-// never read). The gradient sums then come from the tiles, per slice of 32 samples:
-// gO (me x ha, leading dimension me) += e [a; 1]', gH (hs x nzp, leading dimension hs) +=
-// g [x; 1]'. Without grad only the sse (and e) is computed. Returns the block's sse.
-#define CDAM_FB_BODY                                                                         \
-  typedef double v4d __attribute__((vector_size(32)));                                       \
-  for (Index s = 0; s < nb; ++s) {                                                           \
-    const double* x = X + s * i;                                                             \
-    for (Index j0 = 0; j0 < hs; j0 += 4) {                                                   \
-      v4d acc;                                                                               \
-      std::memcpy(&acc, b1p + j0, sizeof acc);                                               \
-      for (Index l = 0; l < i; ++l) {                                                        \
-        v4d w;                                                                               \
-        std::memcpy(&w, W1p + l * hs + j0, sizeof w);                                        \
-        acc += w * x[l];                                                                     \
-      }                                                                                      \
-      std::memcpy(A + s * hs + j0, &acc, sizeof acc);                                        \
-    }                                                                                        \
-  }                                                                                          \
-  activate_block(A, hs * nb, tansig);                                                        \
-  double sse = 0.0;                                                                          \
-  for (Index s = 0; s < nb; ++s) {                                                           \
-    const double* x = X + s * i;                                                             \
-    const double* t = T + s * m;                                                             \
-    const double* as = A + s * hs;                                                           \
-    double* vs = V + s * ldv;                                                                \
-    double* e = vs + pe;                                                                     \
-    for (Index k0 = 0; k0 < me; k0 += 4) {                                                   \
-      v4d acc;                                                                               \
-      std::memcpy(&acc, b2p + k0, sizeof acc);                                               \
-      for (Index j = 0; j < h; ++j) {                                                        \
-        v4d w;                                                                               \
-        std::memcpy(&w, W2p + j * me + k0, sizeof w);                                        \
-        acc += w * as[j];                                                                    \
-      }                                                                                      \
-      std::memcpy(e + k0, &acc, sizeof acc);                                                 \
-    }                                                                                        \
-    for (Index k = 0; k < m; ++k) {                                                          \
-      e[k] = t[k] - e[k];                                                                    \
-      sse += e[k] * e[k];                                                                    \
-    }                                                                                        \
-    if (!grad) continue;                                                                     \
-    for (Index k = m; k < me; ++k) e[k] = 0.0;                                               \
-    for (Index j0 = 0; j0 < hs; j0 += 4) {                                                   \
-      v4d acc = {0.0, 0.0, 0.0, 0.0}, av;                                                    \
-      for (Index k = 0; k < m; ++k) {                                                        \
-        v4d w;                                                                               \
-        std::memcpy(&w, W2tp + k * hs + j0, sizeof w);                                       \
-        acc += w * e[k];                                                                     \
-      }                                                                                      \
-      std::memcpy(&av, as + j0, sizeof av);                                                  \
-      const v4d dv = tansig ? 1.0 - av * av : av * (1.0 - av);                               \
-      acc *= dv;                                                                             \
-      std::memcpy(vs + pg + j0, &acc, sizeof acc);                                           \
-      if (full) {                                                                            \
-        for (Index l = 0; l < i; ++l) {                                                      \
-          const v4d vl = dv * x[l];                                                          \
-          std::memcpy(vs + l * hs + j0, &vl, sizeof vl);                                     \
-        }                                                                                    \
-        std::memcpy(vs + i * hs + j0, &dv, sizeof dv);                                       \
-      }                                                                                      \
-    }                                                                                        \
-    std::memcpy(vs + pa, as, sizeof(double) * h);                                            \
-    std::memcpy(vs + pz, x, sizeof(double) * i);                                             \
-  }                                                                                          \
-  for (Index s0 = 0; grad && s0 < nb; s0 += 32) {                                           \
-    const Index ns = nb - s0 < 32 ? nb - s0 : 32;                                            \
-    const double* Vs = V + s0 * ldv;                                                         \
-    tiles(gO, me, Vs + pe, Vs + pa, ldv, me, ha, ns, false, 1.0);                            \
-    tiles(gH, hs, Vs + pg, Vs + pz, ldv, hs, nzp, ns, false, 1.0);                           \
-  }                                                                                          \
+// place of Eigen's small products; one body for double (below) and float (kernels_f32.hpp).
+// The weights come zero-padded (W1p hs x i, b1p hs, W2p me x h, b2p me, W2tp = W2' hs x m,
+// each column a whole number of LANES-vectors VEC of S), so every sum runs in a register over
+// whole vectors of hidden units or outputs: a = act(W1 x + b1) for every sample into A
+// (hs x nb), then per sample y = W2 a + b2, e = t - y, sse += e'e (each squared error in S,
+// summed in double), g = (W2' e) .* d (d = act'(a)), written into V's column (leading dimension
+// ldv): a at row pa (h rows; row pa + h holds 1), e at pe (me), g at pg (hs), x at pz (row
+// pz + i holds 1; the constant and padding rows are the caller's), and with full (mode 2) the
+// fused layout's v_l = d x_l at rows l hs (l < i) and d at i hs (their padding rows get values
+// that are never read). The gradient sums then come from the tiles, per slice of SLICE
+// samples: gO (me x ha, leading dimension me) += e [a; 1]', gH (hs x nzp, leading dimension
+// hs) += g [x; 1]'. Without grad only the sse (and e) is computed. Returns the block's sse.
+// The paths' hooks: ACT_VECTOR(v), the activation of one vector of hidden sums before it is
+// stored (float: the float tanh in registers); ACT_BLOCK(A, n, tansig), that of the block's
+// n hidden values after the sums (double: activate_block); ADD_PRODUCTS(G, ldg, X, W, ldv, R,
+// C, ns, lower): G (double) += X W' over ns samples, R x C, lower as tiles' (double: tiles;
+// float: lm_tiles, each slice's float sums added into double). Double (CDAM_FB_DOUBLE): S
+// double, 4 lanes, SLICE 32.
+// A macro, not a template: a template (the hooks as an always-inlined policy class) gave the
+// same results bit for bit but other register allocation and code placement, and the double
+// gradient pass 4-7 % slower (mlp_mse_gradient at 10,000 x 6-20-8, best of 7: 1.17-1.23
+// against 1.13-1.15 ms, A/B interleaved, load 2; session 9); with the macro the extension
+// builds to the same bytes as with the two former bodies. Left defined for kernels_f32.hpp (which
+// undefines it, as CDAM_OUTPUT_ERRORS and CDAM_FB_ARGS).
+#define CDAM_FB_BODY(S, VEC, LANES, ACT_VECTOR, ACT_BLOCK, ADD_PRODUCTS, SLICE)               \
+  for (Index s = 0; s < nb; ++s) {                                                            \
+    const S* x = X + s * i;                                                                   \
+    for (Index j0 = 0; j0 < hs; j0 += LANES) {                                                \
+      VEC acc;                                                                                \
+      std::memcpy(&acc, b1p + j0, sizeof acc);                                                \
+      for (Index l = 0; l < i; ++l) {                                                         \
+        VEC w;                                                                                \
+        std::memcpy(&w, W1p + l * hs + j0, sizeof w);                                         \
+        acc += w * x[l];                                                                      \
+      }                                                                                       \
+      ACT_VECTOR(acc);                                                                        \
+      std::memcpy(A + s * hs + j0, &acc, sizeof acc);                                         \
+    }                                                                                         \
+  }                                                                                           \
+  ACT_BLOCK(A, hs * nb, tansig);                                                              \
+  double sse = 0.0;                                                                           \
+  for (Index s = 0; s < nb; ++s) {                                                            \
+    const S* x = X + s * i;                                                                   \
+    const S* t = T + s * m;                                                                   \
+    const S* as = A + s * hs;                                                                 \
+    S* vs = V + s * ldv;                                                                      \
+    S* e = vs + pe;                                                                           \
+    for (Index k0 = 0; k0 < me; k0 += LANES) {                                                \
+      VEC acc;                                                                                \
+      std::memcpy(&acc, b2p + k0, sizeof acc);                                                \
+      for (Index j = 0; j < h; ++j) {                                                         \
+        VEC w;                                                                                \
+        std::memcpy(&w, W2p + j * me + k0, sizeof w);                                         \
+        acc += w * as[j];                                                                     \
+      }                                                                                       \
+      std::memcpy(e + k0, &acc, sizeof acc);                                                  \
+    }                                                                                         \
+    for (Index k = 0; k < m; ++k) {                                                           \
+      e[k] = t[k] - e[k];                                                                     \
+      sse += static_cast<double>(e[k] * e[k]);                                                \
+    }                                                                                         \
+    if (!grad) continue;                                                                      \
+    for (Index k = m; k < me; ++k) e[k] = S(0);                                               \
+    for (Index j0 = 0; j0 < hs; j0 += LANES) {                                                \
+      VEC acc = {}, av;                                                                       \
+      for (Index k = 0; k < m; ++k) {                                                         \
+        VEC w;                                                                                \
+        std::memcpy(&w, W2tp + k * hs + j0, sizeof w);                                        \
+        acc += w * e[k];                                                                      \
+      }                                                                                       \
+      std::memcpy(&av, as + j0, sizeof av);                                                   \
+      const VEC dv = tansig ? S(1) - av * av : av * (S(1) - av);                              \
+      acc *= dv;                                                                              \
+      std::memcpy(vs + pg + j0, &acc, sizeof acc);                                            \
+      if (full) {                                                                             \
+        for (Index l = 0; l < i; ++l) {                                                       \
+          const VEC vl = dv * x[l];                                                           \
+          std::memcpy(vs + l * hs + j0, &vl, sizeof vl);                                      \
+        }                                                                                     \
+        std::memcpy(vs + i * hs + j0, &dv, sizeof dv);                                        \
+      }                                                                                       \
+    }                                                                                         \
+    std::memcpy(vs + pa, as, sizeof(S) * h);                                                  \
+    std::memcpy(vs + pz, x, sizeof(S) * i);                                                   \
+  }                                                                                           \
+  for (Index s0 = 0; grad && s0 < nb; s0 += SLICE) {                                          \
+    const Index ns = nb - s0 < SLICE ? nb - s0 : SLICE;                                       \
+    const S* Vs = V + s0 * ldv;                                                               \
+    ADD_PRODUCTS(gO, me, Vs + pe, Vs + pa, ldv, me, ha, ns, false);                           \
+    ADD_PRODUCTS(gH, hs, Vs + pg, Vs + pz, ldv, hs, nzp, ns, false);                          \
+  }                                                                                           \
   return sse;
 
 // Cholesky factor of the symmetric n x n matrix A (lower triangle read, column-major, leading
@@ -457,13 +476,26 @@ namespace kernel {
       const double *__restrict V, Index ldv, const double *__restrict X, Index ldx, Index h,   \
       Index hs, Index ha, Index nz, Index hw, Index nu, Index nb, double *__restrict buf
 
-#define CDAM_FB_ARGS                                                                         \
-  const double *__restrict W1p, const double *__restrict b1p, const double *__restrict W2p,   \
-      const double *__restrict b2p, const double *__restrict W2tp, Index i, Index h, Index m,  \
-      Index hs, Index me, bool tansig, const double *__restrict X, const double *__restrict T, \
-      Index nb, double *__restrict A, double *__restrict gH, Index nzp,                       \
-      double *__restrict gO, Index ha, double *__restrict V, Index ldv, Index pa, Index pe,    \
-      Index pg, Index pz, bool grad, bool full
+// The gradient pass's arguments (S: double or float).
+#define CDAM_FB_ARGS(S)                                                                      \
+  const S *__restrict W1p, const S *__restrict b1p, const S *__restrict W2p,                  \
+      const S *__restrict b2p, const S *__restrict W2tp, Index i, Index h, Index m, Index hs,  \
+      Index me, bool tansig, const S *__restrict X, const S *__restrict T, Index nb,           \
+      S *__restrict A, double *__restrict gH, Index nzp, double *__restrict gO, Index ha,      \
+      S *__restrict V, Index ldv, Index pa, Index pe, Index pg, Index pz, bool grad, bool full
+// No activation hook of CDAM_FB_BODY (ACT_VECTOR, ACT_BLOCK); left defined for kernels_f32.hpp.
+#define CDAM_FB_NO_ACT(...)
+// The double gradient pass (the hooks: this build's activate_block and tiles).
+// The double bodies of the gradient pass and the reduced J'J (their hooks: this build's
+// activate_block and tiles).
+#define CDAM_TILES_SUM(G, ldg, X, W, ldv, R, C, ns, lower)                                   \
+  tiles(G, ldg, X, W, ldv, R, C, ns, lower, 1.0)
+#define CDAM_FB_DOUBLE                                                                       \
+  typedef double v4d __attribute__((vector_size(32)));                                       \
+  CDAM_FB_BODY(double, v4d, 4, CDAM_FB_NO_ACT, activate_block, CDAM_TILES_SUM, 32)
+#define CDAM_JTJR_DOUBLE                                                                     \
+  typedef double v4d __attribute__((vector_size(32)));                                       \
+  CDAM_JTJR_BODY(double, v4d, 4, CDAM_TILES_SUM, kPairSlice)
 
 #define CDAM_SSE_ARGS                                                                        \
   const double *__restrict W1, const double *__restrict b1, const double *__restrict W2,      \
@@ -482,8 +514,8 @@ inline double sse_block(CDAM_SSE_ARGS) { CDAM_SSE_BODY }
 inline void tiles(CDAM_TILES_ARGS) { CDAM_TILES_BODY }
 inline void syrk_lower(CDAM_SYRK_ARGS) { CDAM_SYRK_BODY }
 inline void jtj_blocks(CDAM_JTJ_ARGS) { CDAM_JTJ_BODY }
-inline void jtj_reduced(CDAM_JTJR_ARGS) { CDAM_JTJR_BODY }
-inline double grad_block(CDAM_FB_ARGS) { CDAM_FB_BODY }
+inline void jtj_reduced(CDAM_JTJR_ARGS) { CDAM_JTJR_DOUBLE }
+inline double grad_block(CDAM_FB_ARGS(double)) { CDAM_FB_DOUBLE }
 inline Index cholesky_lower(double* A, Index ld, Index n) { CDAM_CHOL_BODY }
 inline void cholesky_solve(const double* L, Index ld, Index n, double* b) { CDAM_CHOL_SOLVE_BODY }
 }  // namespace generic
@@ -499,8 +531,12 @@ __attribute__((target("avx2,fma"))) inline double sse_block(CDAM_SSE_ARGS) { CDA
 __attribute__((target("avx2,fma"))) inline void tiles(CDAM_TILES_ARGS) { CDAM_TILES_BODY }
 __attribute__((target("avx2,fma"))) inline void syrk_lower(CDAM_SYRK_ARGS) { CDAM_SYRK_BODY }
 __attribute__((target("avx2,fma"))) inline void jtj_blocks(CDAM_JTJ_ARGS) { CDAM_JTJ_BODY }
-__attribute__((target("avx2,fma"))) inline void jtj_reduced(CDAM_JTJR_ARGS) { CDAM_JTJR_BODY }
-__attribute__((target("avx2,fma"))) inline double grad_block(CDAM_FB_ARGS) { CDAM_FB_BODY }
+__attribute__((target("avx2,fma"))) inline void jtj_reduced(CDAM_JTJR_ARGS) {
+  CDAM_JTJR_DOUBLE
+}
+__attribute__((target("avx2,fma"))) inline double grad_block(CDAM_FB_ARGS(double)) {
+  CDAM_FB_DOUBLE
+}
 __attribute__((target("avx2,fma"))) inline Index cholesky_lower(double* A, Index ld, Index n) {
   CDAM_CHOL_BODY
 }
@@ -545,10 +581,10 @@ inline bool cpu_has_avx512() { return false; }
 #undef CDAM_TILES_ARGS
 #undef CDAM_JTJ_BODY
 #undef CDAM_JTJ_ARGS
-#undef CDAM_JTJR_BODY
+#undef CDAM_JTJR_DOUBLE
 #undef CDAM_JTJR_ARGS
-#undef CDAM_FB_BODY
-#undef CDAM_FB_ARGS
+#undef CDAM_TILES_SUM
+#undef CDAM_FB_DOUBLE
 #undef CDAM_CHOL_BODY
 #undef CDAM_CHOL_SOLVE_BODY
 

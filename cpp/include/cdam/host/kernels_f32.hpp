@@ -233,120 +233,25 @@ constexpr Index kLmSlice = 32;
       G[r + c0 * ldg] += static_cast<double>(acc);                                            \
     }
 
+// The hook of kernels.hpp's CDAM_JTJR_BODY and CDAM_FB_BODY in float: the float tiles.
+#define CDAM_F32_TILES_SUM(G, ldg, X, W, ldv, R, C, ns, lower)                                \
+  lm_tiles(G, ldg, X, W, ldv, R, C, ns, lower)
+
 // The reduced J'J sums (kernels.hpp's CDAM_JTJR_BODY) from float rows: per slice of kLmSlice
 // samples the pair products d_j d_j' (hw rows) and z_l z_l' (nu rows) in float in buf (ld
 // hw + nu, kLmSlice columns and 8 floats of slack), Kh (double) += their products; K (double)
 // the C and R blocks from V's [a; 1] against [v; a; 1].
 #define CDAM_F32_JTJR_BODY                                                                    \
   typedef float v8f __attribute__((vector_size(32)));                                         \
-  const Index P = nz * hs, ldb = hw + nu, hp = h * (h + 1) / 2;                               \
-  const float* Dv = V + (nz - 1) * hs;                                                        \
-  for (Index s0 = 0; s0 < nb; s0 += kLmSlice) {                                               \
-    const Index ns = nb - s0 < kLmSlice ? nb - s0 : kLmSlice;                                 \
-    for (Index s = 0; s < ns; ++s) {                                                          \
-      const float* d = Dv + (s0 + s) * ldv;                                                   \
-      const float* x = X + (s0 + s) * ldx;                                                    \
-      float* w = buf + s * ldb;                                                               \
-      /* whole 8-vectors: row j's last store runs up to 7 values into the rows after it      \
-         (written next), the padding, u or the next sample (written after; the buffer's      \
-         slack past the last); d is read within its padded block */                          \
-      for (Index j = 0; j < h; ++j) {                                                         \
-        const float dj = d[j];                                                                \
-        float* wj = w + j * (j + 1) / 2;                                                      \
-        for (Index j2 = 0; j2 <= j; j2 += 8) {                                                \
-          v8f dv;                                                                             \
-          std::memcpy(&dv, d + j2, sizeof dv);                                                \
-          dv *= dj;                                                                           \
-          std::memcpy(wj + j2, &dv, sizeof dv);                                               \
-        }                                                                                     \
-      }                                                                                       \
-      for (Index q = hp; q < hw; ++q) w[q] = 0.0f;                                            \
-      float* u = w + hw;                                                                      \
-      Index q = 0;                                                                            \
-      for (Index l = 0; l < nz; ++l) {                                                        \
-        const float zl = l + 1 < nz ? x[l] : 1.0f;                                            \
-        for (Index l2 = 0; l2 <= l; ++l2) u[q++] = zl * (l2 + 1 < nz ? x[l2] : 1.0f);         \
-      }                                                                                       \
-      for (; q < nu; ++q) u[q] = 0.0f;                                                        \
-    }                                                                                         \
-    lm_tiles(Kh, ldh, buf, buf + hw, ldb, hw, nu, ns, false);                                 \
-    const float* Vs = V + s0 * ldv;                                                           \
-    lm_tiles(K, ldk, Vs + P, Vs, ldv, ha, P, ns, false);                                      \
-    lm_tiles(K + P * ldk, ldk, Vs + P, Vs + P, ldv, ha, ha, ns, true);                        \
-  }
+  CDAM_JTJR_BODY(float, v8f, 8, CDAM_F32_TILES_SUM, kLmSlice)
 
 // The gradient pass (kernels.hpp's CDAM_FB_BODY) in float: 8 hidden units or outputs a vector
-// (hs, me multiples of 8), the activation by this file's float tanh; the sse of the block in
-// double (each squared error in float, as the SSE kernel), the gradient sums into gH, gO
-// (double) per slice by lm_tiles.
+// (hs, me multiples of 8), the activation by this file's float tanh on each vector of hidden
+// sums in registers; each squared error in float, the block's sse in double (as the SSE kernel);
+// the gradient sums into gH, gO (double) per slice of kLmSlice samples by lm_tiles.
 #define CDAM_F32_FB_BODY                                                                      \
   CDAM_F32_VECTORS(8)                                                                         \
-  for (Index s = 0; s < nb; ++s) {                                                            \
-    const float* x = X + s * i;                                                               \
-    for (Index j0 = 0; j0 < hs; j0 += 8) {                                                    \
-      vf acc;                                                                                 \
-      std::memcpy(&acc, b1p + j0, sizeof acc);                                                \
-      for (Index l = 0; l < i; ++l) {                                                         \
-        vf w;                                                                                 \
-        std::memcpy(&w, W1p + l * hs + j0, sizeof w);                                         \
-        acc += w * x[l];                                                                      \
-      }                                                                                       \
-      CDAM_F32_TANH(acc);                                                                     \
-      std::memcpy(A + s * hs + j0, &acc, sizeof acc);                                         \
-    }                                                                                         \
-  }                                                                                           \
-  double sse = 0.0;                                                                           \
-  for (Index s = 0; s < nb; ++s) {                                                            \
-    const float* x = X + s * i;                                                               \
-    const float* t = T + s * m;                                                               \
-    const float* as = A + s * hs;                                                             \
-    float* vs = V + s * ldv;                                                                  \
-    float* e = vs + pe;                                                                       \
-    for (Index k0 = 0; k0 < me; k0 += 8) {                                                    \
-      vf acc;                                                                                 \
-      std::memcpy(&acc, b2p + k0, sizeof acc);                                                \
-      for (Index j = 0; j < h; ++j) {                                                         \
-        vf w;                                                                                 \
-        std::memcpy(&w, W2p + j * me + k0, sizeof w);                                         \
-        acc += w * as[j];                                                                     \
-      }                                                                                       \
-      std::memcpy(e + k0, &acc, sizeof acc);                                                  \
-    }                                                                                         \
-    for (Index k = 0; k < m; ++k) {                                                           \
-      e[k] = t[k] - e[k];                                                                     \
-      sse += static_cast<double>(e[k] * e[k]);                                                \
-    }                                                                                         \
-    if (!grad) continue;                                                                      \
-    for (Index k = m; k < me; ++k) e[k] = 0.0f;                                               \
-    for (Index j0 = 0; j0 < hs; j0 += 8) {                                                    \
-      vf acc = {}, av;                                                                        \
-      for (Index k = 0; k < m; ++k) {                                                         \
-        vf w;                                                                                 \
-        std::memcpy(&w, W2tp + k * hs + j0, sizeof w);                                        \
-        acc += w * e[k];                                                                      \
-      }                                                                                       \
-      std::memcpy(&av, as + j0, sizeof av);                                                   \
-      const vf dv = tansig ? 1.0f - av * av : av * (1.0f - av);                               \
-      acc *= dv;                                                                              \
-      std::memcpy(vs + pg + j0, &acc, sizeof acc);                                            \
-      if (full) {                                                                             \
-        for (Index l = 0; l < i; ++l) {                                                       \
-          const vf vl = dv * x[l];                                                            \
-          std::memcpy(vs + l * hs + j0, &vl, sizeof vl);                                      \
-        }                                                                                     \
-        std::memcpy(vs + i * hs + j0, &dv, sizeof dv);                                        \
-      }                                                                                       \
-    }                                                                                         \
-    std::memcpy(vs + pa, as, sizeof(float) * h);                                              \
-    std::memcpy(vs + pz, x, sizeof(float) * i);                                               \
-  }                                                                                           \
-  for (Index s0 = 0; grad && s0 < nb; s0 += kLmSlice) {                                       \
-    const Index ns = nb - s0 < kLmSlice ? nb - s0 : kLmSlice;                                 \
-    const float* Vs = V + s0 * ldv;                                                           \
-    lm_tiles(gO, me, Vs + pe, Vs + pa, ldv, me, ha, ns, false);                               \
-    lm_tiles(gH, hs, Vs + pg, Vs + pz, ldv, hs, nzp, ns, false);                              \
-  }                                                                                           \
-  return sse;
+  CDAM_FB_BODY(float, vf, 8, CDAM_F32_TANH, CDAM_FB_NO_ACT, CDAM_F32_TILES_SUM, kLmSlice)
 
 #define CDAM_F32_LMT_ARGS                                                                     \
   double *__restrict G, Index ldg, const float *__restrict X, const float *__restrict W,      \
@@ -357,14 +262,6 @@ constexpr Index kLmSlice = 32;
       const float *__restrict V, Index ldv, const float *__restrict X, Index ldx, Index h,     \
       Index hs, Index ha, Index nz, Index hw, Index nu, Index nb, float *__restrict buf
 
-#define CDAM_F32_FB_ARGS                                                                      \
-  const float *__restrict W1p, const float *__restrict b1p, const float *__restrict W2p,      \
-      const float *__restrict b2p, const float *__restrict W2tp, Index i, Index h, Index m,   \
-      Index hs, Index me, bool tansig, const float *__restrict X, const float *__restrict T,  \
-      Index nb, float *__restrict A, double *__restrict gH, Index nzp,                        \
-      double *__restrict gO, Index ha, float *__restrict V, Index ldv, Index pa, Index pe,    \
-      Index pg, Index pz, bool grad, bool full
-
 constexpr Index kMaxIn = 12;  // inputs kept in registers (more are loaded from L1)
 
 namespace generic {
@@ -374,7 +271,7 @@ inline double sse_block(CDAM_F32_SSE_ARGS) {
 }
 inline void lm_tiles(CDAM_F32_LMT_ARGS) { CDAM_F32_TILES_BODY }
 inline void jtj_reduced(CDAM_F32_JTJR_ARGS) { CDAM_F32_JTJR_BODY }
-inline double grad_block(CDAM_F32_FB_ARGS) { CDAM_F32_FB_BODY }
+inline double grad_block(CDAM_FB_ARGS(float)) { CDAM_F32_FB_BODY }
 }  // namespace generic
 
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
@@ -390,7 +287,7 @@ __attribute__((target("avx2,fma"))) inline void lm_tiles(CDAM_F32_LMT_ARGS) {
 __attribute__((target("avx2,fma"))) inline void jtj_reduced(CDAM_F32_JTJR_ARGS) {
   CDAM_F32_JTJR_BODY
 }
-__attribute__((target("avx2,fma"))) inline double grad_block(CDAM_F32_FB_ARGS) {
+__attribute__((target("avx2,fma"))) inline double grad_block(CDAM_FB_ARGS(float)) {
   CDAM_F32_FB_BODY
 }
 }  // namespace avx2
@@ -404,7 +301,7 @@ __attribute__((target("avx512f,avx512vl,avx2,fma"))) inline double sse_block(CDA
 #define CDAM_TARGET_512 __attribute__((target("avx512f,avx512vl,avx2,fma")))
 CDAM_TARGET_512 inline void lm_tiles(CDAM_F32_LMT_ARGS) { CDAM_F32_TILES_BODY }
 CDAM_TARGET_512 inline void jtj_reduced(CDAM_F32_JTJR_ARGS) { CDAM_F32_JTJR_BODY }
-CDAM_TARGET_512 inline double grad_block(CDAM_F32_FB_ARGS) { CDAM_F32_FB_BODY }
+CDAM_TARGET_512 inline double grad_block(CDAM_FB_ARGS(float)) { CDAM_F32_FB_BODY }
 #undef CDAM_TARGET_512
 }  // namespace avx512
 inline int cpu_level() {  // 2: AVX-512F, 1: AVX2 + FMA, 0: neither
@@ -426,7 +323,11 @@ inline int cpu_level() { return 0; }
 #undef CDAM_F32_FB_BODY
 #undef CDAM_F32_LMT_ARGS
 #undef CDAM_F32_JTJR_ARGS
-#undef CDAM_F32_FB_ARGS
+#undef CDAM_F32_TILES_SUM
+#undef CDAM_JTJR_BODY
+#undef CDAM_FB_BODY
+#undef CDAM_FB_ARGS
+#undef CDAM_FB_NO_ACT
 #undef CDAM_F32_SSE_BODY
 #undef CDAM_F32_SSE_ARGS
 #undef CDAM_F32_VECTORS
