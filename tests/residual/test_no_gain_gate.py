@@ -19,8 +19,8 @@ from joint_generator import rigid_axis
 M, FV, A = 0.5, 2.0, 0.007
 
 
-def _axis(fs: float, duration: float, seed: int = 0, noise: float = 1e-5):
-    """Exact zero-order-hold solution of M q'' + Fv q' = u - A w (u and w held over each
+def _axis(fs: float, duration: float, seed: int = 0, noise: float = 1e-5, a_w: float = A):
+    """Exact zero-order-hold solution of M q'' + Fv q' = u - a_w w (u and w held over each
     sample), multisine u, slow sinusoid w, white encoder noise."""
     rng = np.random.default_rng(seed)
     dt = 1.0 / fs
@@ -30,7 +30,7 @@ def _axis(fs: float, duration: float, seed: int = 0, noise: float = 1e-5):
     u = np.sum(2.5 * np.sin(2 * np.pi * f * t[:, None] + rng.uniform(0, 2 * np.pi, f.size))
                / (1 + f), axis=1)
     w = np.sin(2 * np.pi * 0.25 * t + rng.uniform(0, 2 * np.pi))
-    felt = u - A * w
+    felt = u - a_w * w
     a = np.exp(-FV * dt / M)
     tc = (M / FV) * (1 - a)
     q = np.zeros(n)
