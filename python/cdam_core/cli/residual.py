@@ -234,6 +234,8 @@ def _summary(js: dict) -> list[str]:
     if (tm := st.get("timing")) and "chosen" in tm:
         p = tm.get("p_value")
         out.append(f"input timing: {tm['chosen']}" + (f" (p {p:.2g})" if p is not None else ""))
+        if tm.get("warning"):
+            out.append(f"  warning: {tm['warning']}")
     cut = (st.get("filter_choice") or {}).get("chosen_hz")
     if isinstance(cut, dict):
         out.append("derivative cut-offs: " + ", ".join(f"{k} {v:.3g} Hz" for k, v in cut.items()))
