@@ -26,12 +26,14 @@ decide (in-sample p-values and BIC claim noise columns on short records). A reco
 for the held-out windows claims nothing and says "too short to decide", as
 :func:`.selection.select` does.
 
-A limit, measured: on records whose blocks are shorter than ~8 motion correlation times the
-windows (at most an eighth of a block) are shorter than the motion, and a network's held-out
-error there (10-250x its in-sample error, following the motion) makes neighbouring windows'
-differences share a sign: 2 s axis records, 12 slow noise columns (AR(1), 0.1 s), 20 seeds: one
-claimed (held-out p 1.4e-4 at level 8.3e-4), where the IDIM selection on the same records
-claims none; 3 s records with 0.05 s columns: none of 10.
+The paired units are groups of consecutive windows of a block spanning the motion's
+correlation time (:func:`~cdam_core.residual.validation.motion_horizon`; the blocks cap a window
+at an eighth of a block): a network's held-out error (10-250x its in-sample error on short
+records) follows the motion, and windows shorter than it share one slow error. With the 25-
+sample windows of 2 s axis records (12 AR(1) noise columns of 0.1 s, 20 seeds) one column was
+claimed (held-out p 1.4e-4 at level 8.3e-4), where the IDIM selection claims none; grouped,
+such records hold 5 units and are too short to decide. Fewer than
+:data:`~cdam_core.residual.validation.MIN_WINDOWS` units: too short to decide.
 """
 from __future__ import annotations
 
@@ -41,7 +43,7 @@ from scipy import stats
 from cdam_core.residual import diagnostics as dg
 from cdam_core.models.greybox.effects import candidates as library_candidates
 from cdam_core.models.greybox.estimation import design
-from cdam_core.residual.validation import BlockedCV, paired
+from cdam_core.residual.validation import MIN_WINDOWS, BlockedCV, motion_horizon, paired
 
 
 def _columns(model, sig, effects, eq):
@@ -111,6 +113,23 @@ def _held_out(cv: BlockedCV, X0, y, keep, new_by_key: dict, hidden, epochs, seed
             B = np.column_stack([np.ones(flat.size)] + [c[flat] for c in new])
             e1[k].append(np.mean((r_ho - B @ coef).reshape(rows.shape) ** 2, axis=1) / norm)
     return np.concatenate(e0), {k: np.concatenate(v) for k, v in e1.items()}
+
+
+def _groups(cv: BlockedCV, span: int) -> list:
+    """Indices of the held-out windows (in :meth:`BlockedCV.held_out` order) merged into
+    groups of consecutive windows of one block that span at least ``span`` samples (a block's
+    last, shorter remainder joins its last group)."""
+    size = max(1, -(-int(span) // cv.horizon))
+    out, first = [], 0
+    for st in cv.starts:
+        idx = np.arange(first, first + st.size)
+        first += st.size
+        parts = [idx[i:i + size] for i in range(0, idx.size, size)]
+        if len(parts) > 1 and parts[-1].size < size:
+            parts[-2] = np.concatenate(parts[-2:])
+            parts.pop()
+        out += [p for p in parts if p.size]
+    return out
 
 
 def network_residual(model, sig: dict, equation: str, hidden: int = 6, epochs: int = 60,
@@ -185,11 +204,23 @@ def network_residual(model, sig: dict, equation: str, hidden: int = 6, epochs: i
     screened = [b for b in ranking if b[1]["screened"]]
     try:
         cv = BlockedCV(model, sig, trim)
+        # the network's held-out error follows the motion: windows shorter than the motion's
+        # correlation time (the blocks cap them at an eighth of a block) are merged until they
+        # span it, so the paired units are not one slow error counted several times
+        span = motion_horizon(sig, model.positions)
+        groups = _groups(cv, span)
+        if len(groups) < MIN_WINDOWS:
+            raise ValueError(f"record: {n} samples hold {len(groups)} held-out groups of "
+                             f"windows spanning the motion's correlation time ({span} "
+                             f"samples; need {MIN_WINDOWS}) after {trim} edge samples")
         out["validation"] = {"status": "ok", "method": "blocked cross-validation",
                              "criterion": "held-out equation error of the network",
                              "folds": cv.folds, "horizon_samples": cv.horizon,
-                             "guard_samples": cv.guard,
-                             "test": "one-sided Wilcoxon signed-rank on paired window errors, "
+                             "motion_correlation_samples": span,
+                             "windows_per_unit": int(max(g.size for g in groups)),
+                             "units": len(groups), "guard_samples": cv.guard,
+                             "test": "one-sided Wilcoxon signed-rank on paired errors of "
+                                     "window groups spanning the motion's correlation time, "
                                      "Bonferroni over the candidates ranked"}
     except ValueError as exc:
         cv = None
@@ -204,7 +235,9 @@ def network_residual(model, sig: dict, equation: str, hidden: int = 6, epochs: i
         # read the whole record, held-out blocks included (12 stationary noise columns on a
         # 3 s axis, 10 seeds: the best screened column reached p 0.007 held out against
         # alpha / screened = 0.01)
-        held = {k: paired(e0, v, len(ranking), alpha) for k, v in e1.items()}
+        def unit(e):
+            return np.array([np.mean(e[g]) for g in groups])
+        held = {k: paired(unit(e0), unit(v), len(ranking), alpha) for k, v in e1.items()}
     out["ranking"] = [{"effect": e.key, **res,
                        **({"validation": held[e.key].to_json()} if e.key in held else {})}
                       for e, res, _ in ranking]
