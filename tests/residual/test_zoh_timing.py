@@ -3,7 +3,7 @@ record's timing, not the friction: the axis holds its torque over each sample, a
 "sampled" (the state at the sample instant, RK4 windows fed the sample's midpoint) the
 half-sample timing error stays in the equations (Fv -0.44 %, M +0.2 %) and in the windows, and a
 Coulomb column absorbs part of it (measured, 40-60 s, seeds 0-3: claimed on 6 of 8 records,
-Fc 0.003-0.008, held-out p 2e-5 to 0.0035). The timing chosen from the record is "held" (p ~3e-20)
+Fc 0.003-0.008, held-out p < 0.004). The timing chosen from the record is "held" (p ~3e-20)
 and with it nothing is claimed (0 of 8), while a real Coulomb friction of the same size is
 (4 of 4). ``analyse`` given "sampled" on such a record says so.
 
