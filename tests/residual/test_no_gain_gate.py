@@ -19,18 +19,25 @@ from joint_generator import rigid_axis
 M, FV, A = 0.5, 2.0, 0.007
 
 
-def _axis(fs: float, duration: float, seed: int = 0, noise: float = 1e-5):
-    """Exact zero-order-hold solution of M q'' + Fv q' = u - A w (u and w held over each
-    sample), multisine u, slow sinusoid w, white encoder noise."""
+def _inputs(fs: float, duration: float, seed: int):
+    """The generator (its later draws: the noise), the instants, the multisine torque u and
+    the slow sinusoid w."""
     rng = np.random.default_rng(seed)
-    dt = 1.0 / fs
-    n = int(round(duration * fs))
-    t = np.arange(n) * dt
+    t = np.arange(int(round(duration * fs))) / fs
     f = np.array([0.4, 0.9, 1.7, 3.3, 5.9])
     u = np.sum(2.5 * np.sin(2 * np.pi * f * t[:, None] + rng.uniform(0, 2 * np.pi, f.size))
                / (1 + f), axis=1)
     w = np.sin(2 * np.pi * 0.25 * t + rng.uniform(0, 2 * np.pi))
-    felt = u - A * w
+    return rng, t, u, w
+
+
+def _axis(fs: float, duration: float, seed: int = 0, noise: float = 1e-5, a_w: float = A):
+    """Exact zero-order-hold solution of M q'' + Fv q' = u - a_w w (u and w held over each
+    sample), multisine u, slow sinusoid w, white encoder noise."""
+    rng, t, u, w = _inputs(fs, duration, seed)
+    dt = t[1] - t[0]
+    n = t.size
+    felt = u - a_w * w
     a = np.exp(-FV * dt / M)
     tc = (M / FV) * (1 - a)
     q = np.zeros(n)
@@ -41,9 +48,13 @@ def _axis(fs: float, duration: float, seed: int = 0, noise: float = 1e-5):
     return t, u, w, q + rng.normal(0.0, noise, n)
 
 
-def _prepared(t, u, q, extra, fc):
+def _prepared(t, u, q, extra, fc, timing="held"):
+    """The records here hold the torque over each sample (a zero-order hold): the "held"
+    timing. Prepared as "sampled" (the state at the sample instant), the half-sample timing
+    error is left in the equations and the windows, and on the frictionless axis a Coulomb
+    friction absorbs part of it (test_zoh_timing.py)."""
     m = get_model("rigid_axis")
-    return m, m.prepare(t, {"tau": u, "q": q}, DerivativeFilter(fc), extra)
+    return m, m.prepare(t, {"tau": u, "q": q}, DerivativeFilter(fc), extra, timing)
 
 
 def _share(residual, column) -> float:

@@ -188,7 +188,7 @@ def _save(path, sel, mapping: dict, ds, args) -> dict:
     outputs = [mapping[p] for p in m.positions]
     out = {}
     if args.firmware:
-        g, out = _firmware_refit(g, ds, inputs, outputs)
+        g, out = _firmware_refit(sel, g, ds, inputs, outputs)
     digest = save_model(path, g, inputs=inputs, outputs=outputs,
                         meta={"source": Path(args.data).name, "command": "cdam residual",
                               "effects": [e.key for e in final.effects],
@@ -196,33 +196,35 @@ def _save(path, sel, mapping: dict, ds, args) -> dict:
     return {"path": str(path), "kind": "greybox", "sha256": digest, **out}
 
 
-def _firmware_refit(g, ds, inputs, outputs):
+def _firmware_refit(sel, g, ds, inputs, outputs):
     """``--firmware``: effects whose columns need rows after t (arm_coupling's zero-phase
-    columns) are replaced by their causal form and the model is refitted on the record
-    (GreyBox's IDIM fit with the same filter and effects): the board computes those columns row
-    by row, so its parameters must be fitted on them. Returns the model and a summary (the
-    one-step RMS error per output on the record: the residual loop's model, the same effects
-    refitted with zero-phase columns and with causal ones, like with like)."""
+    columns) are replaced by their causal form and the model is refitted on the record by the
+    residual loop's own estimator (:func:`cdam_core.residual.selection.refit`: the same
+    prepared record, trim, IDIM-WLS weights and two stages, bounds and chosen estimator): the
+    board computes those columns row by row, so its parameters must be fitted on them. Returns
+    the model and a summary (the one-step RMS error per output on the record: the residual
+    loop's model, the same effects refitted with zero-phase columns (the loop's model again)
+    and with causal ones, like with like)."""
     import dataclasses
     import numpy as np
-    from cdam_core.models.greybox.augmented import GreyBox
+    from cdam_core.residual.benchmark import greybox_of
+    from cdam_core.residual.selection import refit
     causal = [dataclasses.replace(e, causal=True) if e.name == "arm_coupling" else e
               for e in g.effects]
     if causal == list(g.effects):
         return g, {"firmware_refit": False}
     U = np.column_stack([ds.column(c) for c in inputs])
     Y = np.column_stack([ds.column(c) for c in outputs])
-    def refit(effects):
-        return GreyBox(g.declared, g.dt, effects, g.fixed, g.cutoff_hz, g.filter_order,
-                       g.extra_columns).fit(U, Y)
 
     def rms(model):
         P = model.predict(U, Y, mode="one_step")
         return np.sqrt(np.mean((P[2:] - Y[2:]) ** 2, axis=0)).tolist()
 
-    h = refit(causal)
-    return h, {"firmware_refit": True, "one_step_rms_residual_model": rms(g),
-               "one_step_rms_zero_phase": rms(refit(list(g.effects))),
+    h = greybox_of(refit(sel, causal), g.dt)
+    return h, {"firmware_refit": True,
+               "estimator": (sel.settings.get("estimator") or {}).get("chosen", "IDIM-LS"),
+               "one_step_rms_residual_model": rms(g),
+               "one_step_rms_zero_phase": rms(greybox_of(refit(sel, list(g.effects)), g.dt)),
                "one_step_rms_causal": rms(h)}
 
 
@@ -234,6 +236,10 @@ def _summary(js: dict) -> list[str]:
     if (tm := st.get("timing")) and "chosen" in tm:
         p = tm.get("p_value")
         out.append(f"input timing: {tm['chosen']}" + (f" (p {p:.2g})" if p is not None else ""))
+        if tm.get("warning"):
+            out.append(f"  warning: {tm['warning']}")
+        if tm.get("warning"):
+            out.append(f"  warning: {tm['warning']}")
     cut = (st.get("filter_choice") or {}).get("chosen_hz")
     if isinstance(cut, dict):
         out.append("derivative cut-offs: " + ", ".join(f"{k} {v:.3g} Hz" for k, v in cut.items()))

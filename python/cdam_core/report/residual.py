@@ -205,6 +205,8 @@ def write_report(sel: Selection, out_dir, title: str | None = None, source: str 
                   + ("(the state half a sample after each input sample: a zero-order hold)"
                      if tm["chosen"] == "held" else "(the state at the input's sample instant)")
                   + f"; {why}.", ""]
+        if tm.get("warning"):
+            lines += [f"**Warning:** {tm['warning']}.", ""]
     lines += ["## Declared model", ""] + _PARAM_HEAD + _param_rows(sel, sel.declared, units)
     lines += ["", "| channel | RMSE | NRMSE |", "|---|---|---|"]
     lines += [f"| {k} | {v['rmse']:.4g} {channel_unit(sel.model.name, k, units)} | "

@@ -80,6 +80,7 @@ class Selection:
     free_run: dict = field(default_factory=dict)   # label -> simulated positions
     final_error: dict = field(default_factory=dict)  # errors of the final model
     removed: list = field(default_factory=list)      # effects dropped by the backward pass
+    signals: dict | None = None   # the prepared record the loop estimated on (:func:`refit`)
 
 
 def _yty(f: Fit) -> float:
@@ -288,25 +289,33 @@ def _choose_estimator(model, sig, current: Fit, cv, alpha: float, trim: int,
             best = "oe" if v.better else "iv"
         else:
             best = better[0]
+    f, info = _estimate(best, current, sig, cv, trim)
+    if f is current:   # held out it worked; on the whole record it did not
+        out["iv" if best == "iv" else "refinement"] = info
+        return current, out
+    out.update(chosen=ESTIMATORS[best], idim=dict(current.theta),
+               **({"iv": info} if best == "iv" else {"refinement": info}))
+    return f, out
+
+
+def _estimate(best: str, current: Fit, sig, cv, trim: int) -> tuple[Fit, dict]:
+    """IDIM-IV (``best`` "iv") or the output-error refinement ("oe") from the IDIM fit
+    ``current`` on the whole record; (fit, report), or (``current``, {"status":
+    "unavailable", "reason"}) when it cannot be run."""
     U = cv.inputs(current.effects)
     if best == "iv":
         try:
-            f, info = iv_fit(current, sig, U, cv.horizon, trim, integrator=cv.integrator)
-        except ValueError as exc:     # held out it worked; on the whole record it did not
-            out["iv"] = {"status": "unavailable", "reason": str(exc)}
-            return current, out
-        out.update(chosen=ESTIMATORS["iv"], idim=dict(current.theta), iv=info)
-        return f, out
+            return iv_fit(current, sig, U, cv.horizon, trim, integrator=cv.integrator)
+        except ValueError as exc:
+            return current, {"status": "unavailable", "reason": str(exc)}
     g = greybox_of(current, cv.dt)
     try:
         info = cv.refine(g, current, U, np.ones(cv.Y.shape[0], bool))
     except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
-        out["refinement"] = {"status": "unavailable", "reason": str(exc)}
-        return current, out
+        return current, {"status": "unavailable", "reason": str(exc)}
     theta = {p: g.theta_[p] for p in current.estimated}
-    out.update(chosen=ESTIMATORS["oe"], idim=dict(current.theta),
-               refinement={k: v for k, v in info.items() if k != "std"})
-    return refined_fit(current, theta, info["std"], sig), out
+    return (refined_fit(current, theta, info["std"], sig),
+            {k: v for k, v in info.items() if k != "std"})
 
 
 def select(model, sig: dict, candidates, alpha: float = 0.01, max_steps: int | None = None,
@@ -485,7 +494,35 @@ def select(model, sig: dict, candidates, alpha: float = 0.01, max_steps: int | N
                     "equations alone; the errors-in-variables equations estimate the rest with "
                     "those held; an effect changing only them is claimed on held-out data only"}
     return Selection(model, declared, current, steps, declared_error, white, unexplained,
-                     settings, store, final_error, removed)
+                     settings, store, final_error, removed, sig)
+
+
+def refit(sel: Selection, effects) -> Fit:
+    """The final model's structure with ``effects`` in place of its own, estimated on the
+    loop's prepared record as the loop estimated the final model: its trim, its IDIM-WLS
+    weights and two stages (held by the prepared signals), the physical bounds where the
+    unconstrained fit breaks them, then the estimator the loop chose (IDIM-IV or the
+    output-error refinement run on the whole record as :func:`select` ran it). For a model
+    whose effects must change form but not meaning (``cdam residual --firmware``: the causal
+    arm_coupling columns a board can compute). Raises ValueError when ``sel`` holds no
+    prepared record or the chosen estimator cannot be run on the new structure."""
+    sig = sel.signals
+    if sig is None:
+        raise ValueError("sel: holds no prepared record (a Selection made by select)")
+    model, trim = sel.final.model, int(sel.settings["trim"])
+    f = fit(model, sig, tuple(effects), trim)
+    if f.violations:
+        f = fit(model, sig, f.effects, trim, bounded=True)
+    chosen = (sel.settings.get("estimator") or {}).get("chosen", "IDIM-LS")
+    best = next((k for k, v in ESTIMATORS.items() if v == chosen), None)
+    if best is None:
+        return f
+    cv = BlockedCV(model, sig, trim, criterion="simulation")
+    f2, info = _estimate(best, f, sig, cv, trim)
+    if f2 is f:
+        raise ValueError(f"estimator: {chosen} could not be run on the new structure "
+                         f"({info.get('reason', '')})")
+    return f2
 
 
 def _unexplained_structure(model, sig, current: Fit, fs: float, alpha: float,

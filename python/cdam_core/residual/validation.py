@@ -41,7 +41,7 @@ from cdam_core.residual.benchmark import greybox_of
 from cdam_core.residual.instrumental import iv_fit
 from cdam_core.residual.output_error import refine
 
-__all__ = ["BlockedCV", "Comparison", "midpoint", "motion_horizon"]
+__all__ = ["BlockedCV", "Comparison", "midpoint", "motion_horizon", "paired"]
 
 FOLDS = 5
 WINDOWS_PER_BLOCK = 8
@@ -118,6 +118,26 @@ class Comparison:
                 "score_simple": self.score_simple, "score_rich": self.score_rich,
                 "structures_tried": self.tested, "level": self.alpha / max(self.tested, 1),
                 "better": self.better, **({"reason": self.reason} if self.reason else {})}
+
+
+def paired(e0, e1, tested: int, alpha: float, reason0: str = "",
+           reason1: str = "") -> Comparison:
+    """Per-window held-out errors ``e1`` (the richer structure) against ``e0`` (the simpler):
+    the one-sided Wilcoxon signed-rank test at ``alpha / tested`` (module doc). A structure
+    with a window it could not score (NaN; ``reason`` says why) loses to one without."""
+    e0, e1 = np.asarray(e0, dtype=float), np.asarray(e1, dtype=float)
+    ok0, ok1 = np.isfinite(e0), np.isfinite(e1)
+    s0 = float(np.mean(e0[ok0])) if ok0.any() else float("nan")
+    s1 = float(np.mean(e1[ok1])) if ok1.any() else float("nan")
+    if not ok1.all():      # a structure that cannot be simulated on held-out data loses
+        return Comparison(1.0, int(ok1.sum()), s0, s1, tested, alpha, reason1)
+    if not ok0.all():      # ... and one that can beats one that cannot
+        return Comparison(0.0, int(ok0.sum()), s0, s1, tested, alpha, reason0)
+    d = e0 - e1
+    if not np.any(d):
+        return Comparison(1.0, d.size, s0, s1, tested, alpha)
+    p = float(stats.wilcoxon(d, alternative="greater").pvalue)
+    return Comparison(p, d.size, s0, s1, tested, alpha)
 
 
 class BlockedCV:
@@ -314,18 +334,20 @@ class BlockedCV:
         ``(effects, model or None)``."""
         e0, r0 = self.scores(*simple)
         e1, r1 = self.scores(*rich)
-        ok0, ok1 = np.isfinite(e0), np.isfinite(e1)
-        s0 = float(np.mean(e0[ok0])) if ok0.any() else float("nan")
-        s1 = float(np.mean(e1[ok1])) if ok1.any() else float("nan")
-        if not ok1.all():      # a structure that cannot be simulated on held-out data loses
-            return Comparison(1.0, int(ok1.sum()), s0, s1, tested, alpha, r1)
-        if not ok0.all():      # ... and one that can beats one that cannot
-            return Comparison(0.0, int(ok0.sum()), s0, s1, tested, alpha, r0)
-        d = e0 - e1
-        if not np.any(d):
-            return Comparison(1.0, d.size, s0, s1, tested, alpha)
-        p = float(stats.wilcoxon(d, alternative="greater").pvalue)
-        return Comparison(p, d.size, s0, s1, tested, alpha)
+        return paired(e0, e1, tested, alpha, r0, r1)
+
+    def held_out(self):
+        """Per fold ``(training rows, window rows)``: a boolean mask of the rows a structure
+        may be fitted on (outside the held-out block and ``guard`` samples on each side) and
+        the (windows, H) rows of the record each held-out window scores (start + 1 .. + H), for
+        a structure scored outside :meth:`scores` (:mod:`cdam_core.residual.network`)."""
+        n = self.Y.shape[0]
+        for k in range(self.folds):
+            a, b = int(self.edges[k]), int(self.edges[k + 1])
+            mask = np.ones(n, dtype=bool)
+            mask[max(0, a - self.guard):min(n, b + self.guard)] = False
+            rows = a + self.starts[k][:, None] + np.arange(1, self.horizon + 1)[None, :]
+            yield mask, rows
 
     def describe(self) -> dict:
         crit = ("simulation windows from the measured state" if self.criterion == "simulation"
