@@ -331,7 +331,10 @@ def simulation_refine(g, U, Y, segments, bounds: dict, norm, integrator: str,
         return J
 
     r0 = residual(x0)
-    sol = least_squares(residual, x0, jac=jacobian, bounds=(lo, hi), max_nfev=MAX_EVALUATIONS)
+    # stop where an improvement is statistically nothing (as :func:`refine`'s first stop)
+    ftol = 0.01 / max(n_res - x0.size, 1)
+    sol = least_squares(residual, x0, jac=jacobian, bounds=(lo, hi), max_nfev=MAX_EVALUATIONS,
+                        ftol=ftol)
     theta = dict(zip(names, map(float, sol.x[:P] * scale)))
     g.set_parameters(theta)
     # the sandwich over chunks of the runs (clusters), at the optimum's Jacobian

@@ -401,6 +401,8 @@ class BlockedCV:
         if not ok0.all():      # ... and one that can beats one that cannot
             return Comparison(0.0, int(ok0.sum()), s0, s1, tested, alpha, r0)
         d = e0 - e1
+        # differences at rounding level (two parameterisations of one structure) are ties
+        d[np.abs(d) <= 1e-9 * np.maximum(np.abs(e0), np.abs(e1))] = 0.0
         if not np.any(d):
             return Comparison(1.0, d.size, s0, s1, tested, alpha)
         p = float(stats.wilcoxon(d, alternative="greater").pvalue)
