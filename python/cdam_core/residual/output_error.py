@@ -246,8 +246,9 @@ def simulation_refine(g, U, Y, segments, bounds: dict, norm, integrator: str,
     model accumulates (a small friction error turns into a drift): which of them, if either,
     the loop keeps is decided on held-out data (``BlockedCV``, ``estimator="sim"``).
 
-    Forward differences of relative step :data:`DIFF_STEP` for the parameters (measured on the test's axis: 1e-3 stopped at Fv +1.2 %, M +5 %, where 1e-4 reaches 0.2 %), every
-    column simulated in one batch. Standard deviations: the cluster-robust sandwich (as
+    Forward differences of relative step :data:`DIFF_STEP` for the parameters (measured on the
+    test's axis: 1e-3 stopped at Fv +1.2 %, M +5 %, where 1e-4 reaches 0.2 %), every column
+    simulated in one batch. Standard deviations: the cluster-robust sandwich (as
     :func:`refine`'s) with the runs' ``chunk``-sample pieces as clusters; pieces of one run
     share its drift, so these are optimistic. Returns (theta, info)."""
     names = list(g.estimated_)

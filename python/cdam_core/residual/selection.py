@@ -383,7 +383,8 @@ def select(model, sig: dict, candidates, alpha: float = 0.01, max_steps: int | N
     (default) tries IDIM-IV and the output-error refinement of the final model
     (:mod:`.instrumental`, :mod:`.output_error`) and keeps one only if it predicts held-out
     windows better than IDIM-LS; "idim-ls" keeps IDIM-LS without trying them (cheaper);
-    "idim-iv" or "oe" forces one. Returns a :class:`Selection`.
+    "idim-iv", "oe" or "sim" (simulation error over whole runs) forces one. Returns a
+    :class:`Selection`.
     """
     if not 0 < alpha < 1:
         raise ValueError(f"alpha: must be in (0, 1), got {alpha}")
