@@ -357,6 +357,8 @@ def test_emps_example_as_written_in_a_plain_clone(clone):
     se = next(k for k in rows if "fitted by simulation error" in k)
     windows = re.search(r"(\d\.\d\d s windows)", se).group(1)
     assert f"({'multiple shooting, ' + windows}) {rows[se]:.1f} mm" in text
+    whole = next(k for k in rows if "(whole record, its initial state fitted)" in k)
+    assert f"(whole record, its initial state fitted) {rows[whole]:.1f} mm" in text
     assert f"the published IDIM-LS model {rows['IDIM-LS (M, Fv, Fc, offset)']:.1f} mm" in text
     lti = next(k for k in rows if k.startswith("LTI output error, order "))
     assert f"reproduced here at {rows[lti]:.1f} mm" in text

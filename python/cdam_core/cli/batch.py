@@ -25,8 +25,8 @@ SPEC_HELP = """spec (JSON):
                                           the flights of options.flight_seed, as cdam paper)
    "options": {"hidden": 20, "narx": [2, 2, 1], "epochs": 50, ...}}
 residual: options.model (rigid_axis, flexible_joint, quadrotor, aerial_manipulator), map,
-fixed, inputs, outputs, cutoff, alpha, free_run, estimator (auto, idim-ls, idim-iv, oe;
-output_error: true is estimator oe) (cdam residual's).
+fixed, inputs, outputs, cutoff, alpha, free_run, estimator (auto, idim-ls, idim-iv, oe,
+sim; output_error: true is estimator oe) (cdam residual's).
 See cdam_core.fleet.spec for every option.
 
 example, cdam paper --seeds 10 as one batch (90 tasks; same figures):

@@ -305,13 +305,15 @@ def register(subparsers) -> None:
                         "export-firmware): arm_coupling's columns in their causal form, "
                         "computable row by row, and the model refitted on them")
     p.add_argument("--report", help="write a Markdown report with PNG figures into this folder")
-    p.add_argument("--estimator", choices=("auto", "idim-ls", "idim-iv", "oe"), default="auto",
+    p.add_argument("--estimator", choices=("auto", "idim-ls", "idim-iv", "oe", "sim"),
+                   default="auto",
                    help="how the final model's parameters are estimated (rigid_axis, "
                         "flexible_joint): auto tries IDIM-IV and output error (multiple "
                         "shooting from the IDIM-LS estimates) and keeps one only if it predicts "
                         "held-out windows better than IDIM-LS (the choice and its p-values are "
                         "reported; the flight models try IDIM-IV only); idim-ls skips them "
-                        "(faster); idim-iv or oe forces one "
+                        "(faster); idim-iv, oe or sim (simulation error over whole runs of the "
+                        "record) forces one "
                         "(default: %(default)s)")
     p.add_argument("--output-error", action="store_true",
                    help="force the output-error refinement: the same as --estimator oe")

@@ -278,8 +278,8 @@ def _residual_options(options: dict) -> dict:
     for k in ("free_run", "output_error"):
         if not isinstance(opts[k], bool):
             raise ValueError(f"spec.options.{k}: must be true or false, got {opts[k]!r}")
-    if opts["estimator"] not in ("auto", "idim-ls", "idim-iv", "oe"):
-        raise ValueError(f"spec.options.estimator: expected auto, idim-ls, idim-iv or oe, got "
+    if opts["estimator"] not in ("auto", "idim-ls", "idim-iv", "oe", "sim"):
+        raise ValueError(f"spec.options.estimator: expected auto, idim-ls, idim-iv, oe or sim, got "
                          f"{opts['estimator']!r}")
     if opts["output_error"]:   # the older spelling of estimator "oe"
         if opts["estimator"] not in ("auto", "oe"):

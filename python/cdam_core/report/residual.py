@@ -265,6 +265,17 @@ def write_report(sel: Selection, out_dir, title: str | None = None, source: str 
                       f"{alts})."]
     elif str(est.get("rule", "")).startswith("given"):
         lines += ["", f"Estimator: {est['chosen']} ({est['rule']})."]
+    frc = est.get("free_run_check") or {}
+    if frc.get("earlier"):
+        lines += ["", "Free runs of held-out blocks (each fold's model, its state fitted on the "
+                      "block's first window, the rest simulated open loop; mean normalised "
+                      f"squared error): final model {frc['final_score']:.3g}; "
+                  + "; ".join(f"{r['step']} {r['score_rich']:.3g} (p {r['p_value']:.2g})"
+                              for r in frc["earlier"])
+                  + (". Earlier steps simulating them better than the final model: "
+                     + ", ".join(frc["earlier_better"]) if frc["earlier_better"] else
+                     ". No earlier step simulates them better than the final model")
+                  + " (reported, not acted on)."]
     stab = sel.settings.get("stability") or {}
     if "stable" in stab:
         lines += ["", "Linearised at rest (effects left out): " + (

@@ -26,8 +26,8 @@ def analyse(model: str, t, signals: dict, extra: dict | None = None, fixed: dict
     mass ``m``, which ``payload_mass`` needs); ``declared``: library effect names the declared
     model already holds (on every channel they apply to), e.g. the sidecar's model effects;
     ``estimator``: "auto" (IDIM-LS, IDIM-IV or the output-error refinement, chosen on held-out
-    windows), "idim-ls" (the others not tried: cheaper), "idim-iv" or "oe" (forced); the choice
-    and its evidence are in ``settings["estimator"]``;
+    windows), "idim-ls" (the others not tried: cheaper), "idim-iv", "oe" or "sim" (forced);
+    the choice and its evidence are in ``settings["estimator"]``;
     ``keep_terms``: optional declared terms (``offset``, ``G``, ``Kd``) kept even when the
     held-out data do not support them (a sidecar that declares them);
     ``timing``: "auto" (chosen from the record on held-out blocks,
