@@ -101,3 +101,11 @@ def test_the_network_weight_is_chosen_on_rows_neither_fit_saw(useful):
     np.testing.assert_allclose(P, _free_run(W_all, F, Y[:t0], extra), rtol=1e-8, atol=1e-9)
     # the saturation is what the network adds; fitted to a scrambled residual it harms
     assert kept == useful
+
+
+def test_a_record_too_short_for_the_held_out_fit_is_refused_by_name():
+    U, Y = _plant(n=21)
+    with pytest.raises(ValueError, match=r"U: 21 samples leave 17 before the validation tail"):
+        HybridNarx((1, 1, 1)).fit(U, Y)
+    with pytest.raises(ValueError, match="weight: must be 0 or 1"):
+        HybridNarx((1, 1, 1)).fit_with_weight(U, Y, 0.5)

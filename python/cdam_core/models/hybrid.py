@@ -24,10 +24,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from cdam_core.base.checks import finite_float, positive_int
+from cdam_core.base.checks import as_2d, finite_float, positive_int
 from cdam_core.base.metrics import mean_pearson
 from cdam_core.models.arx import ArxModel, lagged, physics_features
 from cdam_core.models.network import BPNetwork
+from cdam_core.models.protocol import segment_bounds
 
 __all__ = ["HybridNarx"]
 
@@ -74,6 +75,11 @@ class HybridNarx(ArxModel):
         t0 = self.t0
         n_fit = int(round((U.shape[0] - t0) * (1 - float(self.validation_fraction))))
         e = t0 + n_fit          # first validation target; rows n_fit..e-1 are its history
+        self._check_length(U.shape[0])
+        if e < 4 * (t0 + 1) + 10 or U.shape[0] - e < 2:
+            raise ValueError(f"U: {U.shape[0]} samples leave {e} before the validation tail "
+                             f"(validation_fraction {self.validation_fraction}) and "
+                             f"{U.shape[0] - e} in it: too few for orders {tuple(self.orders)}")
         fitter = self.fit_residual or _default_residual_fitter(int(self.seed))
         scale = physics_features(U)[1] if self.features == "physics" else None
         # held out: the ARX and its residual network fitted on rows < e only, both scored in
@@ -94,18 +100,50 @@ class HybridNarx(ArxModel):
             super()._fit(U, Y, feature_scale=scale)
             self.net_ = net
         self.residual_weight_ = 1.0 if kept else 0.0
-        P = self._one_step(U, Y)
+        self._train_mse(U, Y, [(0, U.shape[0])])
+
+    def fit_with_weight(self, U, Y, weight, segments=None) -> "HybridNarx":
+        """The ARX and its residual network both fitted on all of (U, Y), the network's weight
+        ``weight`` (0 or 1) given, not chosen: for a caller that chooses it on validation of
+        its own (``evaluate.papernets.select_hybrid``: blocked). ``segments``: records laid
+        end to end (no regressor crosses a seam). ``validation_r_`` is empty."""
+        Y1 = Y
+        U, Y = as_2d(U, "U"), as_2d(Y, "Y")
+        if U.shape[0] != Y.shape[0]:
+            raise ValueError(f"U, Y: mismatched sample counts ({U.shape[0]} and {Y.shape[0]})")
+        if isinstance(weight, bool) or weight not in (0, 1):
+            raise ValueError(f"weight: must be 0 or 1, got {weight!r}")
+        self._check_params()
+        bounds = segment_bounds(segments, U.shape[0])
+        scale = physics_features(U)[1] if self.features == "physics" else None
+        self._fit_parts(U, Y, scale, self.fit_residual or
+                        _default_residual_fitter(int(self.seed)), bounds)
+        self.residual_weight_, self.validation_r_ = float(weight), {}
+        self._train_mse(U, Y, bounds)
+        self._note_target(Y1)
+        return self
+
+    def _train_mse(self, U, Y, bounds) -> None:
+        """One-step MSE in min-max units (-1..1) over the segments' predicted rows."""
         lo, hi = Y.min(axis=0), Y.max(axis=0)
         span = np.where(hi > lo, hi - lo, 1.0)
-        self.train_mse_ = float(np.mean(((P - Y[t0:]) * 2.0 / span) ** 2))
+        t0 = self.t0
+        E = [(self._one_step(U[a:b], Y[a:b]) - Y[a + t0:b]) * 2.0 / span
+             for a, b in bounds if b - a > t0]
+        self.train_mse_ = float(np.mean(np.vstack(E) ** 2))
 
-    def _fit_parts(self, U, Y, scale, fitter) -> None:
-        """The ARX on (U, Y) by least squares (physics features scaled by ``scale``), then
-        ``fitter`` on its one-step residual; sets ``net_``."""
+    def _fit_parts(self, U, Y, scale, fitter, bounds=None) -> None:
+        """The ARX on (U, Y) by least squares (physics features scaled by ``scale``; records
+        ``bounds``), then ``fitter`` on its one-step residual (each record's rows from its
+        own t0); sets ``net_``."""
         self.net_ = None
-        super()._fit(U, Y, feature_scale=scale)
-        resid = Y[self.t0:] - ArxModel._one_step(self, U, Y)
-        net = fitter(lagged(self._features(U), self.orders.nb, self.orders.nk, self.t0), resid)
+        bounds = bounds or [(0, U.shape[0])]
+        super()._fit(U, Y, bounds, feature_scale=scale)
+        nb, nk, t0 = self.orders.nb, self.orders.nk, self.t0
+        parts = [(lagged(self._features(U[a:b]), nb, nk, t0),
+                  Y[a + t0:b] - ArxModel._one_step(self, U[a:b], Y[a:b]))
+                 for a, b in bounds if b - a > t0]
+        net = fitter(np.vstack([p[0] for p in parts]), np.vstack([p[1] for p in parts]))
         if not isinstance(net, BPNetwork) or net.narx is not None:
             raise ValueError("fit_residual: must return a fitted static BPNetwork")
         self.net_ = net
