@@ -13,7 +13,7 @@ import pytest
 from cdam_core.evaluate.groups import NANODRONE_GROUPS
 from cdam_core.evaluate.horizons import score_horizons
 from cdam_core.evaluate.papernets import (ardrone_comparison, blocked_free_run_r,
-                                          paper_network_fitters)
+                                          blocked_hybrid_r, paper_network_fitters)
 from cdam_core.models.arx import ArxModel
 from cdam_core.models.network import BPNetwork
 from cdam_core.record.realdata import ardrone2
@@ -125,6 +125,49 @@ def test_blocked_score_against_numpy():
             P[t] = np.r_[P[t - 1], U[a + t - 1], 1.0] @ W
         rs.append(_mean_r(Y[a + 1:b], P[1:]))
     assert got == pytest.approx(np.mean(rs), abs=1e-10)
+
+
+def test_blocked_hybrid_score_against_numpy():
+    """The hybrid's blocked score: on each of 3 blocks the ARX is fitted on the rest (numpy
+    least squares, two records), the network on its one-step residual rows of both records
+    (a spy checks what it is given), the two run free on the block: ARX recursion plus the
+    network's term on u(t-1), written out here."""
+    r = np.random.default_rng(4)
+    n = 300
+    U = r.normal(size=(n, 2))
+    Y = np.zeros((n, 2))
+    for t in range(1, n):
+        Y[t] = 0.8 * Y[t - 1] + np.tanh(2 * U[t - 1]) @ np.array([[1.0, 0.3], [-0.5, 0.7]]) \
+            + 0.05 * r.normal(size=2)
+    nets = []
+
+    def spy(X, R):
+        nets.append((X.copy(), R.copy(), BPNetwork(hidden=3, epochs=5, seed=1,
+                                                   threads=1).fit(X, R)))
+        return nets[-1][2]
+    got = blocked_hybrid_r(U, Y, (1, 1, 1), "raw", spy, blocks=3)
+    rs = []
+    for k in range(3):
+        a, b = n * k // 3, n * (k + 1) // 3
+        A, T, X = [], [], []
+        for lo, hi in ((0, a), (b, n)):
+            for t in range(lo + 1, hi):
+                A.append(np.r_[Y[t - 1], U[t - 1], 1.0])
+                T.append(Y[t])
+                X.append(U[t - 1])
+        A, T = np.array(A), np.array(T)
+        W = np.linalg.lstsq(A, T, rcond=None)[0]
+        Xs, Rs, net = nets[k]
+        np.testing.assert_allclose(Xs, np.array(X), rtol=0, atol=0)
+        np.testing.assert_allclose(Rs, T - A @ W, rtol=1e-8, atol=1e-10)
+        P = Y[a:b].copy()
+        term = net.predict(U[a:b - 1])
+        for t in range(1, b - a):
+            P[t] = np.r_[P[t - 1], U[a + t - 1], 1.0] @ W + term[t - 1]
+        rs.append(_mean_r(Y[a + 1:b], P[1:]))
+    assert len(nets) == 3
+    assert got == pytest.approx(np.mean(rs), abs=1e-10)
+    assert got > blocked_free_run_r(U, Y, (1, 1, 1), "raw", blocks=3)   # the tanh it learns
 
 
 def test_standing_table_cells_against_numpy(rows):

@@ -17,14 +17,15 @@ trained by LM, static and NARX, the paper's fixed choices: ``cdam_core.evaluate.
 to every fold, and ``iboa_narx_chosen``: the IBOA NARX network with its smoothing and LM goal
 chosen on the fold's validation flights (``papernets.ChosenNetworkFitter``); ``--ardrone``
 adds the AR.Drone flight (first 75 % / last 25 %, free run, mean r) with the same networks,
-the naive predictor, the ARX chosen on the training part and the
-selected hybrid (preprocessing and structure chosen by blocked validation on the training part,
-network kept only if it helps there); the page then opens with one table of every predictor on
-both records. ``--no-flights`` skips the nano-drone folds; ``--quick`` runs tiny settings (2
+the naive predictor, the ARX chosen on the training part and the selected hybrid
+(preprocessing, structure and network chosen by blocked validation on the training part,
+network kept only if it helps there); the page then opens with one table of every predictor
+on both records. ``--no-flights`` skips the nano-drone folds; ``--quick`` runs tiny settings (2
 optimiser iterations and LM epochs, a one-point hybrid grid) to check the output, not to read.
 The committed report docs/examples/papernets/ is
 ``python docs/examples/nanodrone/cross_trajectory.py docs/examples/papernets --paper-networks
---ardrone`` (about 20 minutes here, on a busy 2-core machine).
+--ardrone`` (about 20 minutes here, on a busy 2-core machine); docs/examples/ardrone/ is the
+AR.Drone part alone, ``... docs/examples/ardrone --no-flights --ardrone`` (31 s CPU).
 """
 import os
 

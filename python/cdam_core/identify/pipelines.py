@@ -233,10 +233,10 @@ def _identify_hybrid(algo, U, Y, seed, cfg, t_start) -> IdentifyRun:
         return runs[-1].model
 
     model = HybridNarx(cfg.narx, cfg.features, fit_residual=fit_residual, seed=seed).fit(U, Y)
-    run = runs[0]
+    run = runs[-1]        # the model's network: refitted on the whole record when kept
     total = time.perf_counter() - t_start
     return IdentifyRun(algo=algo, seed=seed, model=model, curve=run.curve,
                        optimiser_mse=run.optimiser_mse, evaluations=run.evaluations,
                        lm_mse=run.lm_mse, final_mse=model.train_mse_,
-                       seconds={"optimise": run.seconds["optimise"], "lm": run.seconds["lm"],
-                                "total": total})
+                       seconds={"optimise": sum(r.seconds["optimise"] for r in runs),
+                                "lm": sum(r.seconds["lm"] for r in runs), "total": total})

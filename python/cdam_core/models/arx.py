@@ -101,12 +101,17 @@ class ArxModel(Model):
         if n < 4 * (self.t0 + 1) + 10:
             raise ValueError(f"U: {n} samples are too few for orders {tuple(self.orders)}")
 
-    def _fit(self, U, Y, bounds=None):
+    def _fit(self, U, Y, bounds=None, feature_scale=None):
+        """Least squares on (U, Y); ``feature_scale``: the physics features' scale to use
+        (HybridNarx passes its whole record's to a fit on part of it), default U's own."""
         self._check_params()
         self._check_length(U.shape[0])
         self.y_start_ = Y.mean(axis=0)     # where predict(U) alone starts a free run
         self.n_inputs_, self.n_outputs_ = U.shape[1], Y.shape[1]
-        self.feature_scale_ = physics_features(U)[1] if self.features == "physics" else None
+        self.feature_scale_ = None
+        if self.features == "physics":
+            self.feature_scale_ = (physics_features(U)[1] if feature_scale is None
+                                   else feature_scale)
         F = self._features(U)
         # one design per segment (records laid end to end): no regressor crosses a seam
         parts = [(a, b) for a, b in (bounds or [(0, U.shape[0])]) if b - a > self.t0]

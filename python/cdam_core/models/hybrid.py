@@ -8,22 +8,27 @@ the inputs only, so it cannot destabilise the free run:
     y(t) = A [y(t-1); ...; y(t-na)] + B [f(t-nk); ...; f(t-nk-nb+1)] + c
            + alpha * N([f(t-nk); ...; f(t-nk-nb+1)])
 
-A, B, c: least squares on the training record (:class:`.arx.ArxModel`). N: a static
-:class:`.network.BPNetwork` fitted on the one-step residual of the first
-``1 - validation_fraction`` of the training record by ``fit_residual(X, R)`` (the identify
-stage passes one that seeds it with IBOA, BOA or CABC; the default is plain LM from Rng(seed)
-weights); alpha in {0, 1} is chosen by the free-run mean Pearson r on the last
-``validation_fraction`` of the training record (test data is never seen).
-``residual_weight_`` says which was chosen: 0 means the network did not help.
+alpha in {0, 1} is chosen held out: the ARX (A, B, c by least squares,
+:class:`.arx.ArxModel`) and a static :class:`.network.BPNetwork` N on its one-step residual
+(``fit_residual(X, R)``: the identify stage passes one that seeds it with IBOA, BOA or CABC;
+the default is plain LM from Rng(seed) weights) are fitted on the first
+``1 - validation_fraction`` of the training record, and both the ARX alone and ARX + N run
+free on the last ``validation_fraction`` (which neither saw; test data is never seen); alpha
+is 1 where the mean Pearson r there is higher with N. Then the model is refitted on the whole
+training record: the ARX, and N on its residual when kept (not kept: the held-out N stays
+beside it with alpha 0). ``validation_r_`` {0.0: r without, 1.0: r with} holds the held-out
+scores, ``residual_weight_`` alpha (0: the network did not help). The physics features are
+scaled by the whole record's command maxima in both fits.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from cdam_core.base.checks import finite_float, positive_int
+from cdam_core.base.checks import as_2d, finite_float, positive_int
 from cdam_core.base.metrics import mean_pearson
-from cdam_core.models.arx import ArxModel, lagged
+from cdam_core.models.arx import ArxModel, lagged, physics_features
 from cdam_core.models.network import BPNetwork
+from cdam_core.models.protocol import segment_bounds
 
 __all__ = ["HybridNarx"]
 
@@ -43,7 +48,8 @@ class HybridNarx(ArxModel):
         fit_residual: callable (X, R) -> fitted static BPNetwork; None: plain LM (hidden 5,
             30 epochs) from ``Rng(seed)`` weights.
         seed: seed of the default residual fit.
-        validation_fraction: tail of the training record that chooses alpha.
+        validation_fraction: tail of the training record that chooses alpha (held out of
+            both fits that choose it).
     """
 
     kind = "hybrid"
@@ -66,29 +72,81 @@ class HybridNarx(ArxModel):
             raise ValueError("fit_residual: must be callable (X, R) -> fitted BPNetwork")
 
     def _fit(self, U, Y):
-        super()._fit(U, Y)
-        nb, nk, t0 = self.orders.nb, self.orders.nk, self.t0
-        self.net_, self.residual_weight_, self.validation_r_ = None, 0.0, {}
-        F = self._features(U)
-        resid = Y[t0:] - ArxModel._one_step(self, U, Y)
-        Xn = lagged(F, nb, nk, t0)
-        n_fit = int(round(len(Xn) * (1 - float(self.validation_fraction))))
+        t0 = self.t0
+        n_fit = int(round((U.shape[0] - t0) * (1 - float(self.validation_fraction))))
+        e = t0 + n_fit          # first validation target; rows n_fit..e-1 are its history
+        self._check_length(U.shape[0])
+        if e < 4 * (t0 + 1) + 10 or U.shape[0] - e < 2:
+            raise ValueError(f"U: {U.shape[0]} samples leave {e} before the validation tail "
+                             f"(validation_fraction {self.validation_fraction}) and "
+                             f"{U.shape[0] - e} in it: too few for orders {tuple(self.orders)}")
         fitter = self.fit_residual or _default_residual_fitter(int(self.seed))
-        net = fitter(Xn[:n_fit], resid[:n_fit])
+        scale = physics_features(U)[1] if self.features == "physics" else None
+        # held out: the ARX and its residual network fitted on rows < e only, both scored in
+        # free run on the rows from e, which neither saw
+        self._fit_parts(U[:e], Y[:e], scale, fitter)
+        self.validation_r_ = {}
+        Uv, Yv = U[n_fit:], Y[n_fit:]
+        for w in (0.0, 1.0):
+            self.residual_weight_ = w
+            self.validation_r_[w] = mean_pearson(Yv[t0:], self._free_run(Uv, Yv[:t0]))
+        kept = self.validation_r_[1.0] > self.validation_r_[0.0]
+        # the model: the ARX refitted on the whole record, and the network too when kept
+        # (not kept: the held-out network stays beside it with weight 0, unused)
+        if kept:
+            self._fit_parts(U, Y, scale, fitter)
+        else:
+            net = self.net_
+            super()._fit(U, Y, feature_scale=scale)
+            self.net_ = net
+        self.residual_weight_ = 1.0 if kept else 0.0
+        self._train_mse(U, Y, [(0, U.shape[0])])
+
+    def fit_with_weight(self, U, Y, weight, segments=None) -> "HybridNarx":
+        """The ARX and its residual network both fitted on all of (U, Y), the network's weight
+        ``weight`` (0 or 1) given, not chosen: for a caller that chooses it on validation of
+        its own (``evaluate.papernets.select_hybrid``: blocked). ``segments``: records laid
+        end to end (no regressor crosses a seam). ``validation_r_`` is empty."""
+        Y1 = Y
+        U, Y = as_2d(U, "U"), as_2d(Y, "Y")
+        if U.shape[0] != Y.shape[0]:
+            raise ValueError(f"U, Y: mismatched sample counts ({U.shape[0]} and {Y.shape[0]})")
+        if isinstance(weight, bool) or weight not in (0, 1):
+            raise ValueError(f"weight: must be 0 or 1, got {weight!r}")
+        self._check_params()
+        bounds = segment_bounds(segments, U.shape[0])
+        scale = physics_features(U)[1] if self.features == "physics" else None
+        self._fit_parts(U, Y, scale, self.fit_residual or
+                        _default_residual_fitter(int(self.seed)), bounds)
+        self.residual_weight_, self.validation_r_ = float(weight), {}
+        self._train_mse(U, Y, bounds)
+        self._note_target(Y1)
+        return self
+
+    def _train_mse(self, U, Y, bounds) -> None:
+        """One-step MSE in min-max units (-1..1) over the segments' predicted rows."""
+        lo, hi = Y.min(axis=0), Y.max(axis=0)
+        span = np.where(hi > lo, hi - lo, 1.0)
+        t0 = self.t0
+        E = [(self._one_step(U[a:b], Y[a:b]) - Y[a + t0:b]) * 2.0 / span
+             for a, b in bounds if b - a > t0]
+        self.train_mse_ = float(np.mean(np.vstack(E) ** 2))
+
+    def _fit_parts(self, U, Y, scale, fitter, bounds=None) -> None:
+        """The ARX on (U, Y) by least squares (physics features scaled by ``scale``; records
+        ``bounds``), then ``fitter`` on its one-step residual (each record's rows from its
+        own t0); sets ``net_``."""
+        self.net_ = None
+        bounds = bounds or [(0, U.shape[0])]
+        super()._fit(U, Y, bounds, feature_scale=scale)
+        nb, nk, t0 = self.orders.nb, self.orders.nk, self.t0
+        parts = [(lagged(self._features(U[a:b]), nb, nk, t0),
+                  Y[a + t0:b] - ArxModel._one_step(self, U[a:b], Y[a:b]))
+                 for a, b in bounds if b - a > t0]
+        net = fitter(np.vstack([p[0] for p in parts]), np.vstack([p[1] for p in parts]))
         if not isinstance(net, BPNetwork) or net.narx is not None:
             raise ValueError("fit_residual: must return a fitted static BPNetwork")
         self.net_ = net
-        v0 = n_fit                    # validation rows t0 + n_fit.., with t0 rows of history
-        Uv, Yv = U[v0:], Y[v0:]
-        for w in (0.0, 1.0):
-            self.residual_weight_ = w
-            P = self._free_run(Uv, Yv[:t0])
-            self.validation_r_[w] = mean_pearson(Yv[t0:], P)
-        self.residual_weight_ = 1.0 if self.validation_r_[1.0] > self.validation_r_[0.0] else 0.0
-        P = self._one_step(U, Y)
-        lo, hi = Y.min(axis=0), Y.max(axis=0)
-        span = np.where(hi > lo, hi - lo, 1.0)
-        self.train_mse_ = float(np.mean(((P - Y[t0:]) * 2.0 / span) ** 2))
 
     def _input_term(self, F):
         term = super()._input_term(F)

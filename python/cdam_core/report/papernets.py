@@ -110,9 +110,9 @@ def selection_md(details: dict, top: int = 8) -> list[str]:
     lines += [f"| {x['decimation']} | {x['smoothing_passes']} | "
               f"{','.join(map(str, x['narx']))} | {x['features']} | {_cell(x['blocked_r'])} |"
               for x in c]
-    lines += ["", "Networks on the ARX residual (validation: the last 20 % of the training "
-              "part; the test r is reported, never used to choose):", "",
-              "| hidden | seed | validation r with network | validation r ARX part | "
+    lines += ["", "Networks on the ARX residual (validation: the same blocks, the hybrid fitted "
+              "on the rest; the test r is reported, never used to choose):", "",
+              "| hidden | seed | blocked mean r with network | blocked mean r ARX alone | "
               "test r with network | chosen |", "|---|---|---|---|---|---|"]
     lines += [f"| {x['hidden']} | {x['seed']} | {_cell(x['validation_r_network'])} | "
               f"{_cell(x['validation_r_arx'])} | {_cell(x.get('test_r_network'))} | "

@@ -1,0 +1,111 @@
+"""HybridNarx chooses its network's weight held out: the ARX and the residual network of the
+comparison are fitted on the first 80 % of the training record only, and both are scored in
+free run on the last 20 %; the kept model is then refitted on the whole record.
+
+Expected values are computed here with plain numpy from an independent generator (a
+four-command plant with a squared-command term the linear part cannot represent): the physics
+features written out from the X-mixer formulas, least squares by ``np.linalg.lstsq`` on
+regressors built in a loop, the free runs as loops, Pearson r by ``np.corrcoef``. Only the
+residual networks come from the code under test (a spy records what they are fitted on)."""
+import numpy as np
+import pytest
+
+from cdam_core.models import BPNetwork, HybridNarx
+
+
+def _plant(n=900, seed=3, noise=0.005):
+    """Four motor commands -> two outputs; output 0 has a saturating term. The
+    largest command of input 2 falls in the last tenth (so the fit rows' maximum differs from
+    the record's)."""
+    g = np.random.default_rng(seed)
+    U = np.abs(np.c_[[np.convolve(g.normal(size=n), np.ones(7) / 7, "same") for _ in range(4)]].T)
+    U[int(0.95 * n), 2] = 3.0 * U[:, 2].max()
+    Y = np.zeros((n, 2))
+    for t in range(1, n):
+        Y[t, 0] = (0.7 * Y[t - 1, 0] + 0.4 * U[t, 0] - 0.2 * U[t, 1]
+                   + np.tanh(8 * (U[t, 0] - U[t, 3])))
+        Y[t, 1] = 0.5 * Y[t - 1, 1] + 0.3 * U[t, 2] + 0.1 * U[t - 1, 3]
+    return U, Y + noise * g.normal(size=Y.shape)
+
+
+def _features(U, scale):
+    u = U / scale
+    f = u * u
+    return np.c_[u, f.sum(1), f[:, 0] + f[:, 3] - f[:, 1] - f[:, 2],
+                 f[:, 0] + f[:, 1] - f[:, 2] - f[:, 3], f[:, 0] - f[:, 1] + f[:, 2] - f[:, 3]]
+
+
+def _design(F, Y, t0=2):
+    """ARX (2, 2, 0) rows: y(t-1), y(t-2), f(t), f(t-1), 1 for t = t0 .. N-1."""
+    return np.array([np.r_[Y[t - 1], Y[t - 2], F[t], F[t - 1], 1.0] for t in range(t0, len(F))])
+
+
+def _free_run(W, F, Y0, extra, t0=2):
+    """The ARX recursion from the first t0 measured rows, plus ``extra`` (rows t0..)."""
+    P = np.zeros((len(F), W.shape[1]))
+    P[:t0] = Y0
+    for t in range(t0, len(F)):
+        P[t] = np.r_[P[t - 1], P[t - 2], F[t], F[t - 1], 1.0] @ W + extra[t - t0]
+    return P[t0:]
+
+
+def _r(Y, P):
+    return np.mean([np.corrcoef(Y[:, k], P[:, k])[0, 1] for k in range(Y.shape[1])])
+
+
+@pytest.mark.parametrize("useful", [True, False])
+def test_the_network_weight_is_chosen_on_rows_neither_fit_saw(useful):
+    U, Y = _plant()
+    calls = []
+
+    def spy(X, R):
+        calls.append((X.copy(), R.copy()))
+        return BPNetwork(hidden=4, epochs=20, seed=0, threads=1).fit(
+            X, R if useful else R[::-1])      # time-reversed: a residual the inputs do not explain
+    m = HybridNarx((2, 2, 0), "physics", fit_residual=spy).fit(U, Y)
+
+    n, t0 = len(U), 2
+    n_fit = int(round((n - t0) * 0.8))
+    e = t0 + n_fit
+    scale = np.abs(U).max(axis=0)                # the whole record's, in both fits
+    F = _features(U, scale)
+    A = _design(F, Y)
+    # the held-out stage: least squares on the rows before e only
+    W_a = np.linalg.lstsq(A[:n_fit], Y[t0:e], rcond=None)[0]
+    X1, R1 = calls[0]
+    np.testing.assert_allclose(X1, np.c_[F[t0:e], F[t0 - 1:e - 1]], rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(R1, Y[t0:e] - A[:n_fit] @ W_a, rtol=1e-8, atol=1e-10)
+    # both arms of the comparison run free on rows e.. from the rows before them
+    net1 = BPNetwork(hidden=4, epochs=20, seed=0, threads=1).fit(X1, R1 if useful else R1[::-1])
+    Fv, Yv = F[n_fit:], Y[n_fit:]
+    Xv = np.c_[Fv[t0:], Fv[t0 - 1:-1]]
+    r0 = _r(Yv[t0:], _free_run(W_a, Fv, Yv[:t0], np.zeros((len(Xv), 2))))
+    r1 = _r(Yv[t0:], _free_run(W_a, Fv, Yv[:t0], net1.predict(Xv)))
+    assert m.validation_r_[0.0] == pytest.approx(r0, abs=1e-9)
+    assert m.validation_r_[1.0] == pytest.approx(r1, abs=1e-9)
+    # the ARX scored on the tail it was fitted on (the old comparison) looks better than held out
+    W_all = np.linalg.lstsq(A, Y[t0:], rcond=None)[0]
+    r_in = _r(Yv[t0:], _free_run(W_all, Fv, Yv[:t0], np.zeros((len(Xv), 2))))
+    assert r_in > r0
+    # the model: the ARX refitted on every row; the network refitted on its residual if kept
+    kept = r1 > r0
+    assert m.residual_weight_ == (1.0 if kept else 0.0)
+    np.testing.assert_allclose(m.coef_, W_all, rtol=1e-8, atol=1e-10)
+    assert len(calls) == (2 if kept else 1)
+    if kept:
+        X2, R2 = calls[1]
+        np.testing.assert_allclose(X2, np.c_[F[t0:], F[t0 - 1:-1]], rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(R2, Y[t0:] - A @ W_all, rtol=1e-8, atol=1e-10)
+    P = m.predict(U, Y, mode="free_run")[t0:]
+    extra = m.net_.predict(np.c_[F[t0:], F[t0 - 1:-1]]) * m.residual_weight_
+    np.testing.assert_allclose(P, _free_run(W_all, F, Y[:t0], extra), rtol=1e-8, atol=1e-9)
+    # the saturation is what the network adds; fitted to a scrambled residual it harms
+    assert kept == useful
+
+
+def test_a_record_too_short_for_the_held_out_fit_is_refused_by_name():
+    U, Y = _plant(n=21)
+    with pytest.raises(ValueError, match=r"U: 21 samples leave 17 before the validation tail"):
+        HybridNarx((1, 1, 1)).fit(U, Y)
+    with pytest.raises(ValueError, match="weight: must be 0 or 1"):
+        HybridNarx((1, 1, 1)).fit_with_weight(U, Y, 0.5)
