@@ -281,7 +281,10 @@ def test_anchored_fitter_type_out_design_and_the_direct_predictor():
     kinds = [type(p) for p in model.components_]
     assert (ArxDirect in kinds) == t["keep_direct"]
     assert model.weights_.shape == (50, 2, len(model.components_))
-    assert np.array_equal(model.weights_, np.asarray(t["rule_weights"]["worst"]))
+    assert np.array_equal(model.weights_, np.asarray(c["blend_weights"]))
+    assert np.array_equal(fitter.blends_["types_worst"].weights_, model.weights_)
+    assert np.array_equal(fitter.blends_["types_pooled"].weights_,
+                          np.asarray(t["other_rule_weights"]["pooled"]))
     assert set(fitter.blends_) == {"flights", "types_worst", "types_pooled"}
     assert c["direct"]["orders"][2] == c["arx_orders"][2]       # the anchor's delay
     with pytest.raises(ValueError, match="direct"):

@@ -9,15 +9,20 @@ every choice on the validation flights of the training types (the last run of ea
 test type never seen): the anchor ARX's features (raw rotor speeds or their physics features)
 and orders; for each network structure of ``ANCHORED_GRID``, the network on the anchor's
 k-step residual trained on the fit flights, its epoch count where the validation flights'
-k-step error is least; the blend (kind ``kstep_blend``) of the raw-input ARX, the anchor and
-the network with convex weights per prediction step 1..50 and group chosen on the validation
-flights' k-step errors (the point of a 0.01 grid of the simplex whose worst validation flight
-has the least error relative to the raw-input ARX's: ``AnchoredFitter(blend_rule="worst")``); the structure of least validation score (MAE / naive,
+k-step error is least; the blend (kind ``kstep_blend``) of the raw-input ARX, the anchor,
+the direct multi-step predictor (kind ``arx_direct``, kept where it lowers the type-out score)
+and the network with convex weights per prediction step 1..50 and group chosen type out (each
+training type held out in turn from the components' training; the point of a 0.01 grid of the
+simplex whose worst held-out type has the least error relative to the raw-input ARX's:
+``AnchoredFitter(blend_design="types", blend_rule="worst", direct=True)``, fixed before the
+session-9 run); the structure of least validation score (MAE / naive,
 mean over h = 1, 10, 25, 50 and the groups), all its parts retrained on all training flights.
 Scored beside it on the test type at every horizon 1..50 on the same rows: naive, ``arx`` (the
 fold's baseline: raw inputs, orders chosen on the training flights), ``anchor`` (the anchor
 ARX alone), ``network`` (the anchor + network model without the blend) and quad_hybrid (its
-defaults; left out with ``--no-quad-hybrid``). Prints and writes (OUT_DIR/index.md,
+defaults; left out with ``--no-quad-hybrid``), and two other weightings of the same components
+(``VARIANTS``: session 8's weights on the validation flights; the type-out sums under the pooled
+rule). Prints and writes (OUT_DIR/index.md,
 results.json) the RMSE per group at h = 1, 5, 10, 20, 50 per fold and the mean over the folds,
 and per group the horizons where the anchored model is below each of the others; with the
 committed papernets results (docs/examples/papernets/results.json) beside it, the horizons
@@ -78,7 +83,9 @@ def blend_table(choice, scores, at=(1, 5, 10, 20, 50)) -> list[str]:
         return []
     W = np.asarray(choice["blend_weights"])
     parts = choice["blend_components"]
-    lines = ["Blend weights (" + " / ".join(parts) + ") chosen on the validation flights:", "",
+    where = ("type out (each training type held out in turn)"
+             if choice.get("blend_design") == "types" else "on the validation flights")
+    lines = ["Blend weights (" + " / ".join(parts) + f") chosen {where}:", "",
              "| h | " + " | ".join(g.name for g in scores.groups) + " |",
              "|---|" + "---|" * len(scores.groups)]
     for h in at:
@@ -208,8 +215,7 @@ def _write(out, folds, choices, md, fixed) -> int:
             "ARX (features and orders chosen on the validation flights) and the network on "
             "its k-step residual (kind arx_kstep, structures " + json.dumps(ANCHORED_GRID)
             + " over " + json.dumps(fixed) + "; the epoch count: the validation "
-            "flights' best), convex weights per step and group chosen on the validation "
-            "flights, the direct multi-step predictor (kind arx_direct) where it lowers the "
+            "flights' best), the direct multi-step predictor (kind arx_direct) where it lowers the "
             "type-out score, convex weights per step and group chosen type out (each "
             "training type held out in turn from the components' training: the 0.01-grid "
             "point of the simplex whose worst held-out type has the least error relative to "

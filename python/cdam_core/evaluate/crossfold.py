@@ -320,10 +320,12 @@ class AnchoredFitter:
       the components trained on: the situation of the test type). With ``direct``, a
       direct multi-step predictor (``models.arx_direct.ArxDirect``: one least-squares fit per
       step 1..max(``select_horizons``, K), the anchor's features, orders of ``arx_grid``
-      with the anchor's delay chosen on the validation flights like the anchor's) joins the components when its
-      leave-one-type-out score (``models.kstep_blend.held_out_score``: weights by the rule
-      on the other held-out types, the RMSE relative to the raw ARX on this one, mean over
-      types, steps and groups) is lower with it than without; else it is left out.
+      with the anchor's delay chosen on the validation flights like the anchor's) joins the
+      components when its leave-one-type-out score (``models.kstep_blend.held_out_score``:
+      weights by the rule on the other held-out types, the RMSE relative to the raw ARX on
+      this one, mean over types, steps and groups) is lower with it than without; else it is
+      left out. Measured on the 17 flights (docs/examples/nanodrone/anchored/): 0.907-0.936
+      with it against 0.966-0.993 without, kept in all four folds.
 
     ``cache``: a folder where trained networks are kept and reused (``_trained``).
     ``choices``: one record per call (anchor, orders, validation scores, chosen, epochs, blend
@@ -511,7 +513,11 @@ class AnchoredFitter:
                              np.asarray(w).tolist(),
                              "direct": direct,
                              "type_out": None if types is None else
-                             {k: v for k, v in types.items() if k != "weights"},
+                             {**{k: v for k, v in types.items()
+                                 if k not in ("weights", "rule_weights")},
+                              "other_rule_weights": {r: v for r, v in
+                                                     types["rule_weights"].items()
+                                                     if r != self.blend_rule}},
                              "select_seconds": select_seconds,
                              "fit_seconds": time.perf_counter() - t,
                              "validation_history": {k: v for k, v in hist.items()
