@@ -280,6 +280,17 @@ def _records_stack(st: Stack, keep) -> Stack:
                  record=st.record[idx], row=st.row[idx], datasets=st.datasets)
 
 
+def _train_types(train: Stack):
+    """(type of each record name, the sorted types the stack's rows hold); ValueError when
+    they are fewer than two (the type-out design's need)."""
+    rtype = np.array([trajectory_type(n) for n in train.names])
+    present = sorted(set(rtype[np.unique(train.record)]))
+    if len(present) < 2:
+        raise ValueError(f"blend_design 'types': the training flights hold {len(present)} "
+                         f"type(s); at least two are needed")
+    return rtype, present
+
+
 class AnchoredFitter:
     """``fit(train, fit, valid)`` for ``cross_trajectory_fold(models=...)``: the ARX-anchored
     k-step model, every choice on the training flights, never on the test type.
@@ -406,6 +417,8 @@ class AnchoredFitter:
     def __call__(self, train, fit, valid):
         import time
 
+        if self.blend_design == "types":
+            _train_types(train)            # fails before any fit
         t = time.perf_counter()
         self.blends_ = {}
         anchors = {}                       # (features, orders) -> validation score
@@ -551,11 +564,7 @@ class AnchoredFitter:
         other types' training flights and that type's sums; the weights by the rule, with the
         direct predictor where its held-out score is lower. Returns {"weights", "types",
         "keep_direct", "scores", "rule_weights": {rule: weights}}."""
-        rtype = np.array([trajectory_type(n) for n in train.names])
-        present = sorted(set(rtype[np.unique(train.record)]))
-        if len(present) < 2:
-            raise ValueError(f"blend_design 'types': the training flights hold "
-                             f"{len(present)} type(s); at least two are needed")
+        rtype, present = _train_types(train)
         Gs, bs, cs = [], [], []
         for held in present:
             sub = _records_stack(train, np.flatnonzero(rtype != held))
