@@ -49,7 +49,8 @@ def records(tmp_path_factory):
 SMALL = ["--hidden", "4", "--lags", "1", "--horizon", "10", "--epochs", "6", "--stride", "10"]
 
 
-def test_identify_save_evaluate_round_trip(records, tmp_path, capsys, monkeypatch):
+@pytest.mark.parametrize("design", [[], ["--blend-design", "types"]])
+def test_identify_save_evaluate_round_trip(records, tmp_path, capsys, monkeypatch, design):
     import cdam_core.models.file as model_file
     from cdam_core.models.file import load_model
     from cdam_core.record.stack import stack_records
@@ -65,8 +66,8 @@ def test_identify_save_evaluate_round_trip(records, tmp_path, capsys, monkeypatc
     monkeypatch.setattr(model_file, "save_model", spy)
     path = tmp_path / "m.json"
     assert main(["identify", *map(str, train), "--model", "arx_kstep", "--validation",
-                 "per-type", *SMALL, "--save", str(path), "--json", str(tmp_path / "id.json"),
-                 "--quiet"]) == 0
+                 "per-type", *SMALL, *design, "--save", str(path), "--json",
+                 str(tmp_path / "id.json"), "--quiet"]) == 0
     out = capsys.readouterr().out
     idj = json.loads((tmp_path / "id.json").read_text())
     # the rule's validation records: the last run of each type, by file name
@@ -76,6 +77,14 @@ def test_identify_save_evaluate_round_trip(records, tmp_path, capsys, monkeypatc
     assert idj["fixed"]["net_features"] == "raw"                     # two inputs: no rotors
     assert idj["choice"]["validation"][idj["choice"]["chosen"]] < \
         idj["choice"]["validation"]["arx"]
+    if design:                  # type out over the two training types, the direct decision
+        t = idj["choice"]["type_out"]
+        assert t["types"] == ["stepa", "stepb"] and "weights chosen type out" in out
+        assert t["keep_direct"] == (t["scores"]["with_direct"] < t["scores"]["without_direct"])
+        assert any(" direct " in n for n in idj["choice"]["blend_components"]) == \
+            t["keep_direct"]
+    else:
+        assert "type_out" not in idj["choice"]
     # the file predicts what the fitted model does (k-step and from the inputs alone)
     st = stack_records([test])
     mem, disk = fitted["model"], load_model(path)
@@ -112,6 +121,7 @@ def _bad_identify(records, extra):
     (["--model", "arx_kstep", "--horizon", "5000"], "--horizon: windows of 5000 steps do not"),
     (["--stride", "5"], "--stride: needs --model arx_kstep"),
     (["--validation", "last"], "--validation: needs --model arx_kstep"),
+    (["--blend-design", "types"], "--blend-design: needs --model arx_kstep"),
 ])
 def test_identify_options_are_checked(records, capsys, argv, message):
     assert main(_bad_identify(records, argv)) == 2
@@ -185,3 +195,13 @@ def test_help_states_the_anchored_defaults():
             v = ANCHORED_FIXED[name]
             assert f"arx_kstep: {v}," in helps[name] or (name == "stride" and f"default: {v},"
                                                          in helps[name]), (name, helps[name])
+
+
+def test_type_out_needs_two_types(records, capsys):
+    train, _ = records
+    argv = ["identify", str(train[0]), str(train[1]), "--model", "arx_kstep", "--validation",
+            "last", "--blend-design", "types", *SMALL, "--quiet"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("cdam identify: error: TRAIN: blend_design 'types': the training "
+                          "flights hold 1 type(s)") and "\n" not in err

@@ -253,3 +253,44 @@ def test_anchored_fitter_chooses_the_anchors_features_and_orders_on_validation()
     assert f"{c['anchor_features']} {','.join(map(str, c['arx_orders']))}" == best
     assert fitter.anchor_.features == "physics" and list(fitter.anchor_.orders) == \
         c["arx_orders"]
+
+
+def test_anchored_fitter_type_out_design_and_the_direct_predictor():
+    """blend_design='types': one unit per training type (the file-name prefix), the direct
+    predictor kept exactly when its held-out score is the lower, the final blend's components
+    and weights those the choice names; bad option combinations rejected by name."""
+    from cdam_core.evaluate.crossfold import AnchoredFitter
+    from cdam_core.models.arx_direct import ArxDirect
+    from cdam_core.models.kstep_blend import KStepBlend
+    parts = [_plant(1200, s) for s in (31, 32, 33, 34, 35, 36)]
+    train = _stack(parts)
+    train.names = ["a_1", "a_2", "b_1", "b_2", "c_1", "c_2"]
+    fit, valid = _stack([parts[0], parts[2], parts[4]]), _stack([parts[1], parts[3], parts[5]])
+    fitter = AnchoredFitter(grid={"small": {"hidden": 4, "lags": 1, "horizon": 10}},
+                            fixed={"epochs": 8, "weighting": "base"},
+                            arx_grid=((1, 1, 1), (2, 1, 1)), groups=(), blind=(),
+                            blend_design="types", direct=True)
+    model = fitter(train, fit, valid)
+    c = fitter.choices[-1]
+    assert c["chosen"] == "small" and isinstance(model, KStepBlend)
+    t = c["type_out"]
+    assert t["types"] == ["a", "b", "c"]
+    s = t["scores"]
+    assert np.isfinite(s["with_direct"]) and np.isfinite(s["without_direct"])
+    assert t["keep_direct"] == (s["with_direct"] < s["without_direct"])
+    kinds = [type(p) for p in model.components_]
+    assert (ArxDirect in kinds) == t["keep_direct"]
+    assert model.weights_.shape == (50, 2, len(model.components_))
+    assert np.array_equal(model.weights_, np.asarray(c["blend_weights"]))
+    assert np.array_equal(fitter.blends_["types_worst"].weights_, model.weights_)
+    assert np.array_equal(fitter.blends_["types_pooled"].weights_,
+                          np.asarray(t["other_rule_weights"]["pooled"]))
+    assert set(fitter.blends_) == {"flights", "types_worst", "types_pooled"}
+    assert c["direct"]["orders"][2] == c["arx_orders"][2]       # the anchor's delay
+    with pytest.raises(ValueError, match="direct"):
+        AnchoredFitter(direct=True)
+    with pytest.raises(ValueError, match="blend_design"):
+        AnchoredFitter(blend_design="folds")
+    train.names = ["a_1"] * 6
+    with pytest.raises(ValueError, match="type"):
+        fitter(train, fit, valid)

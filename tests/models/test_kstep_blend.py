@@ -177,3 +177,39 @@ def test_bad_input_is_named(blend):
         KStepBlend(comps, groups=[0, 1]).choose(U, Y, units=[0, 1])
     with pytest.raises(ValueError, match="groups: 3 labels for 2 outputs"):
         KStepBlend(comps, weights=w, groups=[0, 1, 2])
+
+
+def test_unit_errors_and_held_out_score_against_explicit_predictions():
+    """Three units, one extra component (J = 1): the pooled weight of a unit set is the
+    closed form clip(sum d e / sum d d, 0, 1) per step and output (one output per group);
+    the held-out score is then each unit's blended RMSE over the reference's, averaged,
+    computed here from the predictions themselves."""
+    from cdam_core.models.kstep_blend import held_out_score, unit_errors
+    rng = np.random.default_rng(5)
+    steps, m, rows = 3, 2, 40
+    P = rng.normal(size=(3, 2, steps, rows, m))        # unit, component, step, row, output
+    Y = P[:, 0] + 0.5 * rng.normal(size=(3, steps, rows, m))
+    Y += 0.6 * (P[:, 1] - P[:, 0]) * np.array([1.0, 0.5, 1.5])[:, None, None, None]
+    D, E = P[:, 1] - P[:, 0], Y - P[:, 0]
+    G = np.einsum("uhri,uhri->uhi", D, D)[..., None, None]
+    b = np.einsum("uhri,uhri->uhi", D, E)[..., None]
+    c = np.einsum("uhri,uhri->uhi", E, E)
+    # unit_errors: against the blended predictions' squared error
+    W = rng.uniform(size=(steps, m, 1))
+    W = np.concatenate([1 - W, W], axis=2)
+    blended = W[None, :, None, :, 0] * P[:, 0] + W[None, :, None, :, 1] * P[:, 1]
+    np.testing.assert_allclose(unit_errors(W, G, b, c), np.sum((Y - blended) ** 2, axis=2),
+                               rtol=1e-10)
+    ratios = []
+    for u in range(3):
+        rest = [v for v in range(3) if v != u]
+        w = np.clip(np.sum(D[rest] * E[rest], axis=(0, 2)) / np.sum(D[rest] ** 2, axis=(0, 2)),
+                    0, 1)                                                  # (steps, m)
+        pred = (1 - w)[:, None, :] * P[u, 0] + w[:, None, :] * P[u, 1]
+        ratios.append(np.sqrt(np.sum((Y[u] - pred) ** 2, axis=1) / np.sum(E[u] ** 2, axis=1)))
+    assert held_out_score(G, b, c, [0, 1], "pooled") == pytest.approx(np.mean(ratios),
+                                                                       rel=1e-10)
+    with pytest.raises(ValueError, match="units"):
+        held_out_score(G[:1], b[:1], c[:1], [0, 1], "pooled")
+    with pytest.raises(ValueError, match="rule"):
+        held_out_score(G, b, c, [0, 1], "median")

@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from cdam_core.models import (ArxKStep, ArxModel, BPNetwork, HybridNarx, KStepBlend, QuadHybrid,
+from cdam_core.models import (ArxDirect, ArxKStep, ArxModel, BPNetwork, HybridNarx, KStepBlend, QuadHybrid,
                               QuadPhysics, load_model, read_model_file, save_model)
 from cdam_core.models.file import KINDS as FILE_KINDS
 from cdam_core.models.greybox.augmented import GreyBox
@@ -64,6 +64,7 @@ KINDS = {
     "arx_kstep": lambda: (ArxKStep((2, 2, 1), hidden=3, horizon=5, lags=2, epochs=3, stride=10,
                                    net_features="physics", blind=[0, 1, 2],
                                    groups=[0, 0, 0, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3]), _quad()),
+    "arx_direct": lambda: (ArxDirect((2, 2, 1), horizon=6), _plant()),
     "kstep_blend": lambda: _blend(),
 }
 

@@ -9,15 +9,20 @@ every choice on the validation flights of the training types (the last run of ea
 test type never seen): the anchor ARX's features (raw rotor speeds or their physics features)
 and orders; for each network structure of ``ANCHORED_GRID``, the network on the anchor's
 k-step residual trained on the fit flights, its epoch count where the validation flights'
-k-step error is least; the blend (kind ``kstep_blend``) of the raw-input ARX, the anchor and
-the network with convex weights per prediction step 1..50 and group chosen on the validation
-flights' k-step errors (the point of a 0.01 grid of the simplex whose worst validation flight
-has the least error relative to the raw-input ARX's: ``AnchoredFitter(blend_rule="worst")``); the structure of least validation score (MAE / naive,
+k-step error is least; the blend (kind ``kstep_blend``) of the raw-input ARX, the anchor,
+the direct multi-step predictor (kind ``arx_direct``, kept where it lowers the type-out score)
+and the network with convex weights per prediction step 1..50 and group chosen type out (each
+training type held out in turn from the components' training; the point of a 0.01 grid of the
+simplex whose worst held-out type has the least error relative to the raw-input ARX's:
+``AnchoredFitter(blend_design="types", blend_rule="worst", direct=True)``, fixed before the
+session-9 run); the structure of least validation score (MAE / naive,
 mean over h = 1, 10, 25, 50 and the groups), all its parts retrained on all training flights.
 Scored beside it on the test type at every horizon 1..50 on the same rows: naive, ``arx`` (the
 fold's baseline: raw inputs, orders chosen on the training flights), ``anchor`` (the anchor
 ARX alone), ``network`` (the anchor + network model without the blend) and quad_hybrid (its
-defaults; left out with ``--no-quad-hybrid``). Prints and writes (OUT_DIR/index.md,
+defaults; left out with ``--no-quad-hybrid``), and two other weightings of the same components
+(``VARIANTS``: session 8's weights on the validation flights; the type-out sums under the pooled
+rule). Prints and writes (OUT_DIR/index.md,
 results.json) the RMSE per group at h = 1, 5, 10, 20, 50 per fold and the mean over the folds,
 and per group the horizons where the anchored model is below each of the others; with the
 committed papernets results (docs/examples/papernets/results.json) beside it, the horizons
@@ -50,7 +55,12 @@ from cdam_core.models.flight.hybrid import QuadHybrid  # noqa: E402
 from cdam_core.record.realdata.nanodrone import nanodrone_files  # noqa: E402
 
 AT = (1, 5, 10, 20, 50)
-SHOWN = ("naive", "arx", "anchor", "network", "quad_hybrid", "anchored")
+SHOWN = ("naive", "arx", "anchor", "network", "quad_hybrid", "anchored_flights",
+         "anchored_types_pooled", "anchored")
+#: the weightings measured beside the model (reported, never chosen on the test type):
+#: session 8's design (weights on the validation flights, rule "worst") and the type-out
+#: design under the other rule
+VARIANTS = {"anchored_flights": "flights", "anchored_types_pooled": "types_pooled"}
 PAPERNETS = Path(__file__).resolve().parents[1] / "papernets" / "results.json"
 
 
@@ -73,7 +83,9 @@ def blend_table(choice, scores, at=(1, 5, 10, 20, 50)) -> list[str]:
         return []
     W = np.asarray(choice["blend_weights"])
     parts = choice["blend_components"]
-    lines = ["Blend weights (" + " / ".join(parts) + ") chosen on the validation flights:", "",
+    where = ("type out (each training type held out in turn)"
+             if choice.get("blend_design") == "types" else "on the validation flights")
+    lines = ["Blend weights (" + " / ".join(parts) + f") chosen {where}:", "",
              "| h | " + " | ".join(g.name for g in scores.groups) + " |",
              "|---|" + "---|" * len(scores.groups)]
     for h in at:
@@ -82,6 +94,18 @@ def blend_table(choice, scores, at=(1, 5, 10, 20, 50)) -> list[str]:
                  for g in scores.groups]
         lines.append(f"| {h} | " + " | ".join(cells) + " |")
     return lines
+
+
+def _type_out_text(c) -> str:
+    """The direct predictor's orders and the type-out scores of one fold's choice."""
+    out = ""
+    if c.get("direct"):
+        out += f"; direct orders {tuple(c['direct']['orders'])}"
+    t = c.get("type_out")
+    if t and t.get("scores"):
+        out += ("; type-out score with direct {with_direct:.4f}, without {without_direct:.4f}"
+                .format(**t["scores"]) + (" (kept)" if t["keep_direct"] else " (left out)"))
+    return out
 
 
 def wins(scores, against, model="anchored", extra=None) -> list[str]:
@@ -130,7 +154,8 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     fixed = dict(ANCHORED_FIXED, epochs=2) if args.quick else None
     hybrid_kw = dict(epochs=2) if args.quick else {}
-    fitter = AnchoredFitter(fixed=fixed, cache=args.cache)
+    fitter = AnchoredFitter(fixed=fixed, cache=args.cache, blend_design="types",
+                            blend_rule="worst", direct=True)
 
     def quad_hybrid(train, fit, valid):
         dt = float(np.median(np.diff(train.t)))
@@ -143,6 +168,9 @@ def main(argv=None) -> int:
         models["anchored"] = fitter
         models["anchor"] = lambda train, fit, valid: fitter.anchor_   # the anchor ARX alone
         models["network"] = lambda train, fit, valid: fitter.network_ or fitter.anchor_
+        for name, key in VARIANTS.items():
+            models[name] = lambda train, fit, valid, key=key: \
+                fitter.blends_.get(key, fitter.anchor_)
         f = cross_trajectory_fold(files, test_type, loaded=loaded, physics=False,
                                   models=models)
         folds.append(f)
@@ -151,11 +179,12 @@ def main(argv=None) -> int:
                 f"{c['anchor_features']} ARX {tuple(c['arx_orders'])}; anchored: chosen "
                 f"{c['chosen']}, epochs {c['epochs']}; validation MAE / naive "
                 + ", ".join(f"{k} {v:.4f}" for k, v in c["validation"].items())
+                + _type_out_text(c)
                 + f"; selection {c['select_seconds']:.0f} s, final fit {c['fit_seconds']:.0f} s;"
                 f" fold {time.perf_counter() - t0:.0f} s)")
         body = [rmse_table(f.scores), "", *blend_table(c, f.scores), "",
                 "Horizons (of 1..50) where anchored is below:", "",
-                *wins(f.scores, ("naive", "arx", "anchor", "quad_hybrid"))]
+                *wins(f.scores, ("naive", "arx", "anchor", "quad_hybrid", *VARIANTS))]
         print(head + "\n\n" + "\n".join(body) + "\n", flush=True)
         md += [head, "", *body, ""]
     with open(out / "folds.pkl", "wb") as fh:
@@ -176,7 +205,7 @@ def _write(out, folds, choices, md, fixed) -> int:
         if nets:
             extra["paper networks (best of each h)"] = np.min(np.stack(list(nets.values())), 0)
     body = [rmse_table(mean), "", "Horizons (of 1..50) where anchored is below:", "",
-            *wins(mean, ("naive", "arx", "anchor", "quad_hybrid"), extra=extra)]
+            *wins(mean, ("naive", "arx", "anchor", "quad_hybrid", *VARIANTS), extra=extra)]
     print("## Mean over the folds\n\n" + "\n".join(body), flush=True)
     page = ["# ARX-anchored k-step model on the cross-trajectory protocol", "",
             "Produced by `python docs/examples/nanodrone/anchored_crossfold.py OUT_DIR`. RMSE "
@@ -186,9 +215,14 @@ def _write(out, folds, choices, md, fixed) -> int:
             "ARX (features and orders chosen on the validation flights) and the network on "
             "its k-step residual (kind arx_kstep, structures " + json.dumps(ANCHORED_GRID)
             + " over " + json.dumps(fixed) + "; the epoch count: the validation "
-            "flights' best), convex weights per step and group chosen on the validation "
-            "flights (one per training type: the 0.01-grid point of the simplex whose worst "
-            "flight has the least error relative to the raw-input ARX's); network: the "
+            "flights' best), the direct multi-step predictor (kind arx_direct) where it lowers the "
+            "type-out score, convex weights per step and group chosen type out (each "
+            "training type held out in turn from the components' training: the 0.01-grid "
+            "point of the simplex whose worst held-out type has the least error relative to "
+            "the raw-input ARX's; rule and design fixed before the test folds were run); "
+            "anchored_flights: session 8's weights (chosen on the validation flights with "
+            "the fit flights' components, rule worst); anchored_types_pooled: the type-out "
+            "sums under the pooled least-squares rule; network: the "
             "arx_kstep model alone; the paper networks' "
             "curves are the committed "
             "docs/examples/papernets/results.json (same folds and test flights).", "",

@@ -68,6 +68,14 @@ def register(subparsers) -> None:
     add_validation_option(p, "TRAIN records validate arx_kstep's choices (the ARX orders, "
                              "the network's structure and epoch count, whether it is kept; "
                              "then it is refitted on all TRAIN)")
+    p.add_argument("--blend-design", default=None, choices=["flights", "types"],
+                   help="arx_kstep: where the blend's weights are chosen: flights: on the "
+                        "validation records (session 8's design); types: type out (each "
+                        "trajectory type of TRAIN held out in turn from the components' "
+                        "training, the direct multi-step predictor kept where it lowers the "
+                        "type-out score; evaluate.crossfold.AnchoredFitter, the design of "
+                        "docs/examples/nanodrone/anchored/; needs two types in TRAIN) "
+                        "(default: flights)")
     p.add_argument("--weighting", default=None, choices=["flat", "naive"],
                    help="quad_hybrid: the steps' errors alike, or each over the naive "
                         "predictor's error at that step (default: the model's)")
@@ -114,9 +122,9 @@ def run(args) -> int:
     train = stack_records(args.train, inputs=args.inputs, outputs=args.outputs, **read)
     if args.model == "arx_kstep":
         return _anchored(args, train, read)
-    for name in ("stride",):
+    for name in ("stride", "blend_design"):
         if getattr(args, name) is not None:
-            raise CliError(f"--{name}: needs --model arx_kstep")
+            raise CliError(f"--{name.replace('_', '-')}: needs --model arx_kstep")
     if args.validation != "auto":
         raise CliError("--validation: needs --model arx_kstep (other kinds: --validate FILE)")
     if args.model in ("quad_physics", "quad_hybrid"):
@@ -349,8 +357,9 @@ def _anchored(args, train, read) -> int:
         if max(fit.lengths) <= K + 1:
             raise CliError(f"--horizon: windows of {K} steps do not fit in any segment of the "
                            f"fitted records (the longest has {max(fit.lengths)} samples)")
-    fitter = AnchoredFitter(grid=grid, fixed=fixed, groups=groups,
-                            **({} if groups else {"blind": ()}))
+    design = args.blend_design or "flights"
+    fitter = AnchoredFitter(grid=grid, fixed=fixed, groups=groups, blend_design=design,
+                            direct=design == "types", **({} if groups else {"blind": ()}))
     t = time.perf_counter()
     try:
         model = fitter(train, fit, valid)
@@ -377,13 +386,25 @@ def _anchored(args, train, read) -> int:
         print(f"  chosen: {c['chosen']} (network kept), {c['epochs']} LM epochs (the "
               f"validation flights' best), structure "
               + ", ".join(f"{k} {v}" for k, v in c["structure"].items()))
+    if c.get("type_out"):
+        t = c["type_out"]
+        print(f"  direct predictor orders {tuple(c['direct']['orders'])} (validation); "
+              f"type-out score with it {t['scores']['with_direct']:.4g}, without "
+              f"{t['scores']['without_direct']:.4g}: "
+              + ("kept" if t["keep_direct"] else "left out"))
     if c.get("blend_weights") is not None:
-        print("  blended per step and group (weights chosen on validation) of: "
+        where = "type out over " + ", ".join(c["type_out"]["types"]) if c.get("type_out") \
+            else "on validation"
+        print(f"  blended per step and group (weights chosen {where}) of: "
               + ", ".join(c.get("blend_components", [])))
     print(f"  wall time {seconds:.0f} s (selection {c['select_seconds']:.0f} s, final fit on "
           f"all TRAIN {c['fit_seconds']:.0f} s)")
     choice = {k: c[k] for k in ("arx_orders", "validation", "chosen", "epochs", "structure",
-                                "anchor_features", "blend_components") if k in c}
+                                "anchor_features", "blend_components", "blend_design",
+                                "direct") if k in c}
+    if c.get("type_out"):
+        choice["type_out"] = {k: v for k, v in c["type_out"].items()
+                              if k != "other_rule_weights"}
     choice["validation"] = {k: v if v != float("inf") else None       # None: diverged
                             for k, v in choice["validation"].items()}
     result = {"kind": type(model).kind, "dt": dt, "train_file": names,

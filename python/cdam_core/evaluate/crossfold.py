@@ -32,13 +32,18 @@ from cdam_core.evaluate.baselines import ARX_GRID, relative_error, select_arx
 from cdam_core.evaluate.groups import NANODRONE_GROUPS
 from cdam_core.evaluate.horizons import HorizonScores, score_horizons
 from cdam_core.models.arx import FEATURES, ArxModel
-from cdam_core.models.kstep_blend import KStepBlend
+from cdam_core.models.arx_direct import ArxDirect
+from cdam_core.models.flight.physics import QuadPhysics
+from cdam_core.models.kstep_blend import RULES as BLEND_RULES
+from cdam_core.models.kstep_blend import KStepBlend, held_out_score, rule_weights
+from cdam_core.record.realdata.nanodrone import load_nanodrone, trajectory_type
+from cdam_core.record.stack import Stack, stack_records
 
 BLENDS = ("none", "validation")
-BLEND_RULES = ("worst", "pooled")
-from cdam_core.models.flight.physics import QuadPhysics
-from cdam_core.record.realdata.nanodrone import load_nanodrone, trajectory_type
-from cdam_core.record.stack import stack_records
+#: where the blend's weights are chosen (``AnchoredFitter``): on the validation flights (one
+#: per training type; their types seen in training), or type out (each training type held out
+#: in turn from the components' training)
+BLEND_DESIGNS = ("flights", "types")
 
 __all__ = ["Fold", "cross_trajectory_fold", "mean_over_folds", "physics_effects_fold",
            "AnchoredFitter", "ANCHORED_GRID", "ANCHORED_FIXED", "ANCHORED_BLIND",
@@ -263,9 +268,32 @@ ANCHORED_FIXED = {"epochs": 20, "net_features": "physics", "weighting": "base", 
 ANCHORED_BLIND = ("x", "y", "z")
 
 
+def _records_stack(st: Stack, keep) -> Stack:
+    """The rows of ``st`` whose record index is in ``keep`` (its segments whole)."""
+    keep = set(int(k) for k in keep)
+    sel = [(a, b) for a, b in st.pieces() if int(st.record[a]) in keep]
+    if not sel:
+        raise ValueError("records: none selected")
+    idx = np.concatenate([np.arange(a, b) for a, b in sel])
+    return Stack(names=st.names, inputs=st.inputs, outputs=st.outputs, U=st.U[idx],
+                 Y=st.Y[idx], t=st.t[idx], lengths=[b - a for a, b in sel],
+                 record=st.record[idx], row=st.row[idx], datasets=st.datasets)
+
+
+def _train_types(train: Stack):
+    """(type of each record name, the sorted types the stack's rows hold); ValueError when
+    they are fewer than two (the type-out design's need)."""
+    rtype = np.array([trajectory_type(n) for n in train.names])
+    present = sorted(set(rtype[np.unique(train.record)]))
+    if len(present) < 2:
+        raise ValueError(f"blend_design 'types': the training flights hold {len(present)} "
+                         f"type(s); at least two are needed")
+    return rtype, present
+
+
 class AnchoredFitter:
     """``fit(train, fit, valid)`` for ``cross_trajectory_fold(models=...)``: the ARX-anchored
-    k-step model, every choice on the validation flights of the training types.
+    k-step model, every choice on the training flights, never on the test type.
 
     The anchor: an ARX whose features (each of ``anchor_features``: raw inputs, physics
     features of four rotor speeds; a kind the inputs do not allow is skipped) and orders (of
@@ -275,27 +303,49 @@ class AnchoredFitter:
     baseline. Each structure of ``grid`` (over ``fixed``) is trained on the fit flights on
     that anchor (error scales per group of ``groups``: the benchmark's position, velocity,
     attitude, rates; the outputs ``blind`` hidden from the network), LM tracking the validation
-    flights' k-step error (the best epoch kept). With ``blend="validation"`` (default) the
-    model is a ``KStepBlend`` of the raw-input ARX (the reference: orders chosen as the fold's
-    baseline chooses them), the anchor (when it is not that ARX) and the network model, its
-    convex weights per prediction step (1..max(``select_horizons``, K)) and group chosen on
-    the validation flights' k-step errors (``models.kstep_blend``): with ``blend_rule="worst"``
-    (default) the point of a 0.01 grid of the simplex whose worst validation flight (one per
-    training type) has the least error relative to the raw-input ARX's, so that on no
-    validation flight is a group worse than that ARX at any step; ``"pooled"``: least squares
-    pooled over the validation flights (no group worse than any component in the sum over the
-    flights). ``blend="none"``: the network model alone. Each candidate is scored on the validation flights as the anchor is; the least
+    flights' k-step error (the best epoch kept). With ``blend="validation"`` (default) each
+    candidate is a ``KStepBlend`` of the raw-input ARX (the reference: orders chosen as the
+    fold's baseline chooses them), the anchor (when it is not that ARX) and the network model,
+    weighted per prediction step (1..max(``select_horizons``, K)) and group by ``blend_rule``
+    on the validation flights (one unit per flight); ``blend="none"``: the network model
+    alone. Each candidate is scored on the validation flights as the anchor is; the least
     wins. The anchor winning, the model is the anchor fitted on all training flights; else the
     chosen structure retrained on all training flights for its best validation epoch count
-    (the ARXs refitted there too), blended with the weights chosen on the validation flights.
+    (the ARXs refitted there too), blended.
+
+    Blend rules (``models.kstep_blend.rule_weights``): ``"worst"`` (default): per step and
+    group the point of a 0.01 grid of the simplex whose worst unit has the least error
+    relative to the raw-input ARX's; ``"pooled"``: least squares pooled over the units.
+
+    Where the final blend's weights come from (``blend_design``, fixed before any test fold
+    of session 9 was run):
+
+    - ``"flights"`` (session 8): the weights chosen on the validation flights with the fit
+      flights' components (the validation flights' types are among the components' training
+      types, so validation never sees an unseen type);
+    - ``"types"``: type out inside the training types: for each training type (the file name's
+      prefix, ``trajectory_type``), the components (the ARXs with the chosen orders, the
+      direct predictor, the chosen network structure trained for its chosen epoch count) are
+      fitted on all training flights of the other types, and that type's flights give one
+      unit's sums; the weights by ``blend_rule`` over those units (each unit a type none of
+      the components trained on: the situation of the test type). With ``direct``, a
+      direct multi-step predictor (``models.arx_direct.ArxDirect``: one least-squares fit per
+      step 1..max(``select_horizons``, K), the anchor's features, orders of ``arx_grid``
+      with the anchor's delay chosen on the validation flights like the anchor's) joins the
+      components when its leave-one-type-out score (``models.kstep_blend.held_out_score``:
+      weights by the rule on the other held-out types, the RMSE relative to the raw ARX on
+      this one, mean over types, steps and groups) is lower with it than without; else it is
+      left out. Measured on the 17 flights (docs/examples/nanodrone/anchored/): 0.907-0.936
+      with it against 0.966-0.993 without, kept in all four folds.
+
     ``cache``: a folder where trained networks are kept and reused (``_trained``).
     ``choices``: one record per call (anchor, orders, validation scores, chosen, epochs, blend
-    components and weights, seconds)."""
+    components and weights, the type-out scores and both rules' weights, seconds)."""
 
     def __init__(self, grid=None, fixed=None, select_horizons=(1, 10, 25, 50),
                  arx_grid=ARX_GRID, groups=NANODRONE_GROUPS, blind=ANCHORED_BLIND,
                  anchor_features=("raw", "physics"), blend="validation", cache=None,
-                 blend_rule="worst"):
+                 blend_rule="worst", blend_design="flights", direct=False):
         self.grid = dict(ANCHORED_GRID if grid is None else grid)
         self.fixed = dict(ANCHORED_FIXED if fixed is None else fixed)
         if not self.grid:
@@ -314,6 +364,14 @@ class AnchoredFitter:
         if blend_rule not in BLEND_RULES:
             raise ValueError(f"blend_rule: unknown {blend_rule!r}; use 'worst' or 'pooled'")
         self.blend_rule = blend_rule
+        if blend_design not in BLEND_DESIGNS:
+            raise ValueError(f"blend_design: unknown {blend_design!r}; use "
+                             f"{' or '.join(BLEND_DESIGNS)}")
+        if direct and blend_design != "types":
+            raise ValueError("direct: the direct predictor is decided type out; use "
+                             "blend_design='types'")
+        self.blend_design = blend_design
+        self.direct = bool(direct)
         self.choices = []
 
     def _trained(self, params, stack, valid=None):
@@ -359,7 +417,10 @@ class AnchoredFitter:
     def __call__(self, train, fit, valid):
         import time
 
+        if self.blend_design == "types":
+            _train_types(train)            # fails before any fit
         t = time.perf_counter()
+        self.blends_ = {}
         anchors = {}                       # (features, orders) -> validation score
         for feat in self.anchor_features:
             for orders in self.arx_grid:
@@ -407,38 +468,128 @@ class AnchoredFitter:
                 epochs[name], hist[name] = net.history_["best_epoch"], net.history_
             except ValueError:             # a diverging candidate is no candidate
                 val[name] = float("inf")
-        select_seconds = time.perf_counter() - t
         chosen = min(val, key=lambda k: (val[k], k != "arx", k))
         if chosen != "arx" and not epochs[chosen]:
             chosen = "arx"                 # no epoch lowered the validation error
+        H = max(steps, int({**self.fixed, **self.grid[chosen]}.get("horizon", steps))) \
+            if chosen != "arx" else steps
+        direct, types, flights_w = None, None, None
+        if chosen != "arx" and self.blend == "validation" and self.blend_design == "types":
+            if self.direct:
+                direct = self._direct_orders(feat, orders[2], fit, valid, H)
+            types = self._type_out(train, arxs, direct, feat, H, common, chosen,
+                                   epochs[chosen], labels)
+            flights_w = weights[chosen]
+            weights[chosen] = types["weights"]
+        select_seconds = time.perf_counter() - t
         t = time.perf_counter()
         w = weights.get(chosen)
         final = fitted_arxs(train)
         #: the anchor fitted on all training flights (the model when the ARX wins)
         self.anchor_ = final[-1]
         self.network_ = None               #: the network model alone (None: the ARX won)
+        keep_direct = bool(types and types["keep_direct"])
         if chosen == "arx":
             model = self.anchor_
         else:
             model = self.network_ = self._trained({**common, **self.fixed, **self.grid[chosen],
                                                    "epochs": epochs[chosen]}, train)
             hist["final"] = model.history_
+            if keep_direct:
+                final.append(ArxDirect(direct["orders"], feat, H).fit(
+                    train.U, train.Y, segments=train.lengths))
+            net = model
             if w is not None:
-                model = KStepBlend(final + [model], weights=w, groups=labels)
+                model = KStepBlend(final + [net], weights=w, groups=labels)
+            #: every weighting measured (reported): the session-8 design's weights on the
+            #: ARXs and the network, and both rules' type-out weights
+            self.blends_ = {}
+            if flights_w is not None:
+                self.blends_["flights"] = KStepBlend(final[:len(arxs)] + [net],
+                                                     weights=flights_w, groups=labels)
+            for r, wr in (types or {}).get("rule_weights", {}).items():
+                self.blends_[f"types_{r}"] = KStepBlend(final + [net], weights=np.asarray(wr),
+                                                        groups=labels)
+        names = [f"{f} arx {','.join(map(str, o))}" for f, o in arxs]
+        if keep_direct:
+            names.append(f"{feat} direct {','.join(map(str, direct['orders']))}")
         self.choices.append({"arx_orders": list(orders), "anchor_features": feat,
                              "anchor_validation": {f"{f} {','.join(map(str, o))}": v
                                                    for (f, o), v in anchors.items()},
-                             "blend_components": [f"{f} arx {','.join(map(str, o))}"
-                                                  for f, o in arxs] + ["network"],
+                             "blend_design": self.blend_design, "blend_rule": self.blend_rule,
+                             "blend_components": names + ["network"],
                              "validation": val, "chosen": chosen,
                              "epochs": epochs.get(chosen), "structure": {} if chosen == "arx"
                              else {**self.fixed, **self.grid[chosen],
                                    "epochs": epochs[chosen]},
                              "blend_weights": None if w is None or chosen == "arx" else
                              np.asarray(w).tolist(),
+                             "direct": direct,
+                             "type_out": None if types is None else
+                             {**{k: v for k, v in types.items()
+                                 if k not in ("weights", "rule_weights")},
+                              "other_rule_weights": {r: v for r, v in
+                                                     types["rule_weights"].items()
+                                                     if r != self.blend_rule}},
                              "select_seconds": select_seconds,
                              "fit_seconds": time.perf_counter() - t,
                              "validation_history": {k: v for k, v in hist.items()
                                                     if k != "final"},
                              "history": hist.get("final")})
         return model
+
+    def _direct_orders(self, feat, nk, fit, valid, H) -> dict:
+        """The direct predictor's orders: those of ``arx_grid`` with the anchor's delay
+        ``nk`` and features ``feat`` (the delay already chosen on the validation flights; the
+        other delay would double the fits), fitted on the fit flights, the least validation
+        score as the anchor's."""
+        scores = {}
+        for o in self.arx_grid:
+            o = tuple(int(v) for v in o)
+            if o[2] != int(nk):
+                continue
+            try:
+                m = ArxDirect(o, feat, H).fit(fit.U, fit.Y, segments=fit.lengths)
+                scores[o] = relative_error(m, valid, self.select_horizons, self.groups)
+            except ValueError:
+                continue
+        if not scores:
+            raise ValueError("arx_grid: every direct candidate failed on the validation flights")
+        best = min(scores, key=lambda o: (scores[o], o))
+        return {"orders": list(best), "validation": {",".join(map(str, o)): v
+                                                     for o, v in scores.items()}}
+
+    def _type_out(self, train, arxs, direct, feat, H, common, chosen, n_epochs, labels):
+        """The type-out design (class doc): per training type, the components fitted on the
+        other types' training flights and that type's sums; the weights by the rule, with the
+        direct predictor where its held-out score is lower. Returns {"weights", "types",
+        "keep_direct", "scores", "rule_weights": {rule: weights}}."""
+        rtype, present = _train_types(train)
+        Gs, bs, cs = [], [], []
+        for held in present:
+            sub = _records_stack(train, np.flatnonzero(rtype != held))
+            out = _records_stack(train, np.flatnonzero(rtype == held))
+            comps = [ArxModel(o, f).fit(sub.U, sub.Y, segments=sub.lengths) for f, o in arxs]
+            if direct is not None:
+                comps.append(ArxDirect(direct["orders"], feat, H).fit(
+                    sub.U, sub.Y, segments=sub.lengths))
+            comps.append(self._trained({**common, **self.fixed, **self.grid[chosen],
+                                        "epochs": n_epochs}, sub))
+            G, b, c = KStepBlend(comps, groups=labels).sums(out.U, out.Y, out.lengths, H)
+            Gs.append(G[0])
+            bs.append(b[0])
+            cs.append(c[0])
+        G, b, c = np.stack(Gs), np.stack(bs), np.stack(cs)
+        scores, keep = {}, False
+        if direct is not None:
+            jd = len(arxs) - 1                     # the direct predictor's column in G, b
+            idx = [j for j in range(b.shape[-1]) if j != jd]
+            scores = {"with_direct": held_out_score(G, b, c, labels, self.blend_rule),
+                      "without_direct": held_out_score(G[..., idx, :][..., idx], b[..., idx],
+                                                       c, labels, self.blend_rule)}
+            keep = scores["with_direct"] < scores["without_direct"]
+            if not keep:
+                G, b = G[..., idx, :][..., idx], b[..., idx]
+        W = {r: rule_weights(G, b, c, labels, r) for r in BLEND_RULES}
+        return {"weights": W[self.blend_rule], "types": present, "keep_direct": bool(keep),
+                "scores": scores, "rule_weights": {r: v.tolist() for r, v in W.items()}}

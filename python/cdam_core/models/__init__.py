@@ -4,10 +4,12 @@ Kinds: ``bp_network`` (:class:`BPNetwork`, static or NARX), ``arx`` (:class:`Arx
 ``hybrid`` (:class:`HybridNarx`: ARX + network on its residual), ``greybox`` (the declared
 grey-box model plus the effects the residual loop found, :mod:`.greybox`), ``arx_kstep``
 (:class:`ArxKStep`: ARX + recurrent network on its k-step residual, trained on the k-step
-error), ``kstep_blend`` (:class:`KStepBlend`: fitted models blended per prediction step and
+error), ``arx_direct`` (:class:`ArxDirect`: one least-squares fit per prediction step on the
+ARX's regressors over the step's window), ``kstep_blend`` (:class:`KStepBlend`: fitted models blended per prediction step and
 group of outputs), the flight models (:mod:`.flight`).
 """
 from cdam_core.models.arx import ArxModel, physics_features
+from cdam_core.models.arx_direct import ArxDirect
 from cdam_core.models.arx_kstep import ArxKStep
 from cdam_core.models.flight.hybrid import QuadHybrid
 from cdam_core.models.flight.physics import QuadPhysics
@@ -17,7 +19,7 @@ from cdam_core.models.kstep_blend import KStepBlend
 from cdam_core.models.network import BPNetwork, hidden_node_candidates
 from cdam_core.models.protocol import Model, segment_bounds
 
-__all__ = ["ArxKStep", "ArxModel", "BPNetwork", "HybridNarx", "KINDS", "KStepBlend", "Model",
+__all__ = ["ArxDirect", "ArxKStep", "ArxModel", "BPNetwork", "HybridNarx", "KINDS", "KStepBlend", "Model",
            "ModelFile",
            "QuadHybrid", "QuadPhysics", "hidden_node_candidates", "load_model", "physics_features",
            "read_model_file", "save_model", "segment_bounds"]

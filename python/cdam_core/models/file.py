@@ -5,7 +5,7 @@ docs/MODEL_FILE.md)::
 
     {"format": "cdam-model", "version": 2, "kind": "bp_network" | "arx" | "hybrid" | "greybox"
                                           | "quad_physics" | "quad_hybrid" | "arx_kstep"
-                                          | "kstep_blend",
+                                          | "arx_direct" | "kstep_blend",
      "inputs": [names], "outputs": [names], "preprocessing": {"smoothing_passes": int},
      "meta": {...free JSON...}, "model": {...the kind's section...},
      "monitor": {...optional: the residual monitor's statistics and thresholds...},
@@ -26,6 +26,7 @@ from pathlib import Path
 
 from cdam_core.base.jsonio import plain, write_text_atomic
 from cdam_core.models.arx import ArxModel
+from cdam_core.models.arx_direct import ArxDirect
 from cdam_core.models.arx_kstep import ArxKStep
 from cdam_core.models.flight.hybrid import QuadHybrid
 from cdam_core.models.flight.physics import QuadPhysics
@@ -41,7 +42,7 @@ VERSION = 2
 KINDS: dict[str, type] = {"bp_network": BPNetwork, "arx": ArxModel, "hybrid": HybridNarx,
                           "greybox": GreyBox, "quad_physics": QuadPhysics,
                           "quad_hybrid": QuadHybrid, "arx_kstep": ArxKStep,
-                          "kstep_blend": KStepBlend}
+                          "arx_direct": ArxDirect, "kstep_blend": KStepBlend}
 KStepBlend.component_kinds = KINDS       # the blend's components: any kind the file knows
 MAX_FILE_BYTES = 256 * 1024 * 1024
 

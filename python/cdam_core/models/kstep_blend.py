@@ -35,7 +35,8 @@ from cdam_core.base.checks import positive_int
 from cdam_core.models.protocol import Model
 from cdam_core.models.schema import field_array
 
-__all__ = ["KStepBlend", "simplex_weights", "minimax_weights", "blend_sums", "simplex_grid"]
+__all__ = ["KStepBlend", "simplex_weights", "minimax_weights", "blend_sums", "simplex_grid",
+           "rule_weights", "unit_errors", "held_out_score", "RULES"]
 
 
 def _qp_simplex(G, b):
@@ -126,6 +127,50 @@ def minimax_weights(G, b, c, labels, resolution: int = 100):
             W[k, sel, 1:] = w
             W[k, sel, 0] = 1.0 - w.sum()
     return W
+
+
+RULES = ("worst", "pooled")
+
+
+def rule_weights(G, b, c, labels, rule: str, resolution: int = 100):
+    """Weights (steps, m, J + 1) from per-unit sums (``KStepBlend.sums``) by ``rule``:
+    ``"worst"`` (``minimax_weights`` over the units) or ``"pooled"`` (``simplex_weights`` of
+    the sums over the units)."""
+    if rule == "worst":
+        return minimax_weights(G, b, c, labels, resolution)
+    if rule == "pooled":
+        return simplex_weights(np.sum(G, axis=0), np.sum(b, axis=0), labels)
+    raise ValueError(f"rule: unknown {rule!r}; use {' or '.join(RULES)}")
+
+
+def unit_errors(W, G, b, c):
+    """Each unit's summed squared error (units, steps, m) of the weights W (steps, m, J + 1)
+    from its sums (``KStepBlend.sums``): c - 2 b'w + w'G w, w the weights of components
+    1..J."""
+    w = np.asarray(W, float)[..., 1:]
+    return (np.asarray(c, float) - 2 * np.einsum("uhij,hij->uhi", b, w)
+            + np.einsum("hij,uhijl,hil->uhi", w, G, w))
+
+
+def held_out_score(G, b, c, labels, rule: str, resolution: int = 100) -> float:
+    """Leave-one-unit-out score of a rule: for each unit, the weights chosen by ``rule`` on
+    the other units and that unit's RMSE relative to the reference's (component 0) per step
+    and group; the mean over units, steps and groups (1: the reference; lower is better).
+    Needs at least two units."""
+    G, b, c = np.asarray(G, float), np.asarray(b, float), np.asarray(c, float)
+    nu = b.shape[0]
+    if nu < 2:
+        raise ValueError(f"units: {nu} given; a held-out score needs at least two")
+    lab = np.asarray(labels)
+    ratios = []
+    for u in range(nu):
+        rest = [v for v in range(nu) if v != u]
+        W = rule_weights(G[rest], b[rest], c[rest], labels, rule, resolution)
+        f = unit_errors(W, G[u:u + 1], b[u:u + 1], c[u:u + 1])[0]        # (steps, m)
+        for g in np.unique(lab):
+            num, den = f[:, lab == g].sum(axis=1), c[u][:, lab == g].sum(axis=1)
+            ratios.append(np.sqrt(np.clip(num, 0, None) / np.where(den > 0, den, 1.0)))
+    return float(np.mean(ratios))
 
 
 class KStepBlend(Model):
@@ -228,13 +273,12 @@ class KStepBlend(Model):
                 raise RuntimeError("components: rollouts not aligned")   # pragma: no cover
             yield k, rows, np.stack([p[2] for p in parts])
 
-    def choose(self, U, Y, segments=None, horizon: int = 50, units=None,
-               resolution: int = 100):
-        """Choose the weights (``horizon`` steps) on records (U, Y, segments) held out of the
-        components' training (module doc); returns self. ``units``: a label per row (e.g. the
-        record, or the record's kind): then per step and group the weights on a grid of the
-        simplex (``resolution``) whose worst unit's error relative to the reference is least
-        (``minimax_weights``) instead of the least squares pooled over the rows."""
+    def sums(self, U, Y, segments=None, horizon: int = 50, units=None):
+        """The sums the weights need from records (U, Y, segments) held out of the
+        components' training: (G (units, horizon, m, J, J), b (units, horizon, m, J),
+        c (units, horizon, m)) as ``blend_sums`` gives them per step (c: the reference's
+        summed squared error), one block per label of ``units`` (a label per row; None: one
+        unit)."""
         horizon = positive_int(horizon, "horizon")
         if not all(c.is_fitted() for c in self.components_):
             raise ValueError("components: fit every component before choosing the weights")
@@ -261,10 +305,18 @@ class KStepBlend(Model):
             n += rows.size
         if not n:
             raise ValueError(f"U: no window of {horizon} steps in the records")
-        if units is None:
-            self.weights_ = simplex_weights(G[0], b[0], self._labels())
-        else:
-            self.weights_ = minimax_weights(G, b, c, self._labels(), resolution)
+        return G, b, c
+
+    def choose(self, U, Y, segments=None, horizon: int = 50, units=None,
+               resolution: int = 100):
+        """Choose the weights (``horizon`` steps) on records (U, Y, segments) held out of the
+        components' training (module doc); returns self. ``units``: a label per row (e.g. the
+        record, or the record's kind): then per step and group the weights on a grid of the
+        simplex (``resolution``) whose worst unit's error relative to the reference is least
+        (``minimax_weights``) instead of the least squares pooled over the rows."""
+        G, b, c = self.sums(U, Y, segments, horizon, units)
+        rule = "pooled" if units is None else "worst"
+        self.weights_ = rule_weights(G, b, c, self._labels(), rule, resolution)
         return self
 
     # -- prediction ----------------------------------------------------------------------------

@@ -201,7 +201,8 @@ class Model(EstimatorParams, ABC):
         U, Y = as_2d(U, "U"), as_2d(Y, "Y")
         bounds = segment_bounds(segments, U.shape[0])
         start = max(self.t0, 1, int(first))
-        if not self.dynamic or type(self)._k_step is not Model._k_step:
+        if not self.dynamic or (type(self)._k_step is not Model._k_step
+                                and type(self)._rollout_step is Model._rollout_step):
             for k in range(1, horizon + 1):   # static maps and kinds with their own k-step
                 P = self.predict(U, Y, mode="k_step", k=k, segments=segments) \
                     if self.dynamic else self.predict(U)
@@ -224,12 +225,19 @@ class Model(EstimatorParams, ABC):
                 live = np.flatnonzero(o + k < end)
                 if not live.size:
                     break
-                W = live.size
-                u = np.ascontiguousarray(Ub[live, k - 1:k + t0].reshape(W * (t0 + 1), -1))
-                z = np.ascontiguousarray(Zb[live, k - 1:k + t0].reshape(W * (t0 + 1), m))
-                P = self._windows_one_step(u, z, W, t0)
+                P = self._rollout_step(k, o[live], Ub[live], Zb[live], U, Y)
                 Zb[live, t0 - 1 + k] = P
                 yield k, o[live] + k, P
+
+    def _rollout_step(self, k, origins, Ub, Zb, U, Y):
+        """Step k of ``rollout`` for the live ``origins``: their buffers Ub, Zb (inputs and
+        outputs, measured then predicted, from t0 - 1 rows before each origin) and the whole
+        segment stack U, Y; by default the one-step predictor on each window's last t0 + 1
+        rows (a kind with its own k-step predictor overrides this and ``_k_step``)."""
+        t0, W = self.t0, len(origins)
+        u = np.ascontiguousarray(Ub[:, k - 1:k + t0].reshape(W * (t0 + 1), -1))
+        z = np.ascontiguousarray(Zb[:, k - 1:k + t0].reshape(W * (t0 + 1), -1))
+        return self._windows_one_step(u, z, W, t0)
 
     def score(self, U, Y, mode: str = "one_step", k: int = 1, segments=None) -> float:
         """Coefficient of determination R^2 averaged over outputs (as scikit-learn), skipping

@@ -1,0 +1,100 @@
+"""The direct multi-step predictor (kind arx_direct) against plain numpy least squares written
+here: per step k, the regressors [y(t), .., y(t-na+1), f(t+1-nk-nb+1), .., f(t+k-nk), 1] of
+every origin t whose target t + k lies in its segment, solved by np.linalg.lstsq."""
+import numpy as np
+import pytest
+
+from cdam_core.models.arx import ArxModel
+from cdam_core.models.arx_direct import ArxDirect
+
+
+def _record(seed, n=400):
+    """A stable two-output linear system driven by two inputs, with noise (independent of the
+    model code)."""
+    rng = np.random.default_rng(seed)
+    U = rng.normal(size=(n, 2))
+    Y = np.zeros((n, 2))
+    for t in range(2, n):
+        Y[t, 0] = 0.6 * Y[t - 1, 0] - 0.2 * Y[t - 2, 1] + 0.5 * U[t - 1, 0] + 0.1 * U[t - 2, 1]
+        Y[t, 1] = 0.3 * Y[t - 1, 1] + 0.1 * Y[t - 1, 0] ** 2 + 0.4 * U[t - 1, 1]
+    return U, Y + 0.05 * rng.normal(size=Y.shape)
+
+
+def _numpy_direct(U, Y, lengths, orders, k):
+    """(origins, coefficients) of step k by np.linalg.lstsq on the explicit design."""
+    na, nb, nk = orders
+    t0 = max(na, nk + nb - 1)
+    rows, targets, origins = [], [], []
+    a = 0
+    for n in lengths:
+        b = a + n
+        for t in range(a + t0 - 1, b - k):
+            reg = [Y[t - j] for j in range(na)]
+            reg += [U[t + s] for s in range(2 - nk - nb, k - nk + 1)]
+            rows.append(np.concatenate(reg + [[1.0]]))
+            targets.append(Y[t + k])
+            origins.append(t)
+        a = b
+    X, T = np.array(rows), np.array(targets)
+    coef = np.linalg.lstsq(X, T, rcond=None)[0]
+    return np.array(origins), X @ coef
+
+
+@pytest.mark.parametrize("orders", [(2, 2, 1), (1, 3, 2)])
+def test_each_step_is_the_least_squares_fit_of_that_step(orders):
+    U1, Y1 = _record(0)
+    U2, Y2 = _record(1, 300)
+    U, Y, lengths = np.vstack([U1, U2]), np.vstack([Y1, Y2]), [400, 300]
+    H = 12
+    m = ArxDirect(orders, "raw", horizon=H).fit(U, Y, segments=lengths)
+    got = {k: (rows, P) for k, rows, P in m.rollout(U, Y, H, segments=lengths)}
+    for k in (1, 2, 5, H):
+        origins, want = _numpy_direct(U, Y, lengths, orders, k)
+        rows, P = got[k]
+        np.testing.assert_array_equal(rows, origins + k)
+        np.testing.assert_allclose(P, want, rtol=0, atol=1e-9 * np.abs(want).max())
+        # predict(k_step) gives the same rows (the first t0 + k - 1 of each segment measured)
+        Pk = m.predict(U, Y, mode="k_step", k=k, segments=lengths)
+        np.testing.assert_allclose(Pk[rows], P, rtol=0, atol=1e-12)
+
+
+def test_step_one_and_beyond_the_horizon_are_the_arx():
+    U, Y = _record(2)
+    m = ArxDirect((2, 2, 1), "raw", horizon=3).fit(U, Y)
+    arx = ArxModel((2, 2, 1), "raw").fit(U, Y)
+    np.testing.assert_allclose(m.predict(U, Y), arx.predict(U, Y), atol=1e-12)
+    np.testing.assert_allclose(m.predict(U, Y, mode="free_run"),
+                               arx.predict(U, Y, mode="free_run"), atol=1e-10)
+    # step 5 = the ARX's recursion continued from the direct steps 2 and 3
+    outs = {k: P for k, _, P in m.rollout(U, Y, 5)}
+    origins = np.arange(1, len(Y) - 5)
+    A, B = arx.coef_[:4], arx.coef_[4:8]
+    Z = {0: Y[origins], -1: Y[origins - 1]}
+    for k in range(1, 6):
+        if k in (2, 3):
+            Z[k] = outs[k][:len(origins)]
+        else:
+            Z[k] = (np.hstack([Z[k - 1], Z[k - 2]]) @ A
+                    + np.hstack([U[origins + k - 1], U[origins + k - 2]]) @ B + arx.coef_[8])
+    np.testing.assert_allclose(outs[5][:len(origins)], Z[5], atol=1e-10)
+
+
+def test_file_round_trip_and_bad_input():
+    from cdam_core.models.file import load_model, save_model
+    U, Y = _record(3)
+    m = ArxDirect((2, 1, 1), "raw", horizon=4).fit(U, Y)
+    d = m.to_dict()
+    m2 = ArxDirect.from_dict(d)
+    np.testing.assert_array_equal(m2.predict(U, Y, mode="k_step", k=3),
+                                  m.predict(U, Y, mode="k_step", k=3))
+    with pytest.raises(ValueError, match="horizon"):
+        ArxDirect((2, 1, 1), horizon=0)
+    bad = dict(d, steps=d["steps"][:-1])
+    with pytest.raises(ValueError, match="model.steps"):
+        ArxDirect.from_dict(bad)
+    import tempfile
+    with tempfile.TemporaryDirectory() as tmp:
+        save_model(f"{tmp}/m.json", m)
+        np.testing.assert_array_equal(load_model(f"{tmp}/m.json").predict(U, Y, mode="k_step",
+                                                                           k=4),
+                                      m.predict(U, Y, mode="k_step", k=4))
