@@ -8,7 +8,6 @@ module, hence `slow`; the 2 s processor-in-the-loop run takes about 30 s of wall
 import json
 import shutil
 import subprocess
-from pathlib import Path
 
 import numpy as np
 import pytest

@@ -8,7 +8,7 @@ import pytest
 
 from cdam_core.evaluate import evaluate
 from cdam_core.identify import IdentifyConfig, identify, select_structure
-from cdam_core.models import ArxModel, HybridNarx, physics_features
+from cdam_core.models import ArxModel, physics_features
 
 
 def _plant(n=1500, seed=0, noise=0.01):

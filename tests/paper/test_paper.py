@@ -2,7 +2,6 @@
 the data pipeline against scipy, bad arguments. One tiny run (short records, few iterations)
 is shared by the tests of its output."""
 import json
-import re
 
 import numpy as np
 import pytest

@@ -11,7 +11,6 @@ the figures (:mod:`.figures`) and index.md / index.html.
 from __future__ import annotations
 
 import json
-import math
 import os
 import sys
 import time

@@ -17,7 +17,7 @@ from cdam_core.sim.effects import EFFECTS, resolve_effects
 from cdam_core.sim.excitation import CHANNELS, experiment_setpoints
 from cdam_core.sim.measurement import ENCODER_COUNTS, LINK_ENCODER_COUNTS, NOISE_STD, measure
 from cdam_core.sim.state import hover_state
-from cdam_core.sim.parameters import (CONTROL_NAMES, PLANT_NAMES, control_vector, plant_dict, plant_vector)
+from cdam_core.sim.parameters import (CONTROL_NAMES, control_vector, plant_dict, plant_vector)
 
 __all__ = ["simulate_flight", "run_closed_loop", "substeps_for", "validation_seed", "write_flight"]
 
