@@ -197,7 +197,8 @@ void register_greybox(py::module_& m) {
         std::vector<double> x(cn), v(cn), xs(cn), vs(cn), k1(cn), k2(cn), k3(cn), k4(cn), l2(cn),
             l3(cn), tt(kChunk), x0s(cn), v0s(cn), side(cn), vp(cn), vm(cn), acc_p(cn),
             acc_m(cn), left(cn);
-        std::vector<char> zero(cn), stuck(cn);
+        std::vector<char> zero(cn), stuck(cn), crossed(cn), held0(cn);
+        std::vector<double> lim_p(cn), lim_m(cn), lim_p0(cn), lim_m0(cn);
         std::vector<int> switch_nodes;
         for (int i = 0; i < static_cast<int>(nodes); ++i)
           if (switching(opp[i])) switch_nodes.push_back(i);
@@ -230,6 +231,12 @@ void register_greybox(py::module_& m) {
               accel(tp, B, xx, vp.data(), srow.data(), tt.data(), th.data(), inv.data(),
                     reg.data(), acc_p.data(), kRecord, held_p.data());
               std::copy(acc_p.begin(), acc_p.end(), a1);
+              for (int i : stick_at)
+                for (int l = 0; l < B; ++l) {
+                  const std::size_t q = i * kChunk + l;
+                  lim_p[q] = zero[q] ? acc_p[q] : 0.0;
+                  lim_m[q] = 0.0;
+                }
               held = held_p;
               std::fill(stuck.begin(), stuck.end(), 0);
               for (int j : stick_at) {
@@ -259,6 +266,7 @@ void register_greybox(py::module_& m) {
                     held[q] = held[q] + w * (held_m[q] - held_p[q]);
                   }
                   stuck[qj] = st;
+                  lim_m[qj] = amj;
                   stuck_any = stuck_any || st;
                   side[qj] = st ? 0.0 : (plus ? 1.0 : -1.0);
                 }
@@ -347,14 +355,35 @@ void register_greybox(py::module_& m) {
                     any_cross = true;
                   }
                 }
-              if (any_cross) {   // the rest of the step from the stop (stickslip.restart)
+              if (any_cross || any_stuck) {   // the step's end (stickslip.finish)
+                crossed = zero;
+                if (any_stuck)
+                  held0 = stuck;
+                else
+                  std::fill(held0.begin(), held0.end(), 0);
+                if (any_stuck) {
+                  lim_p0 = lim_p;
+                  lim_m0 = lim_m;
+                }
+                for (int i : stick_at)
+                  for (int l = 0; l < B; ++l) {
+                    const std::size_t q = i * kChunk + l;
+                    zero[q] = crossed[q] || held0[q];
+                  }
                 start(x.data(), k2.data());
                 for (int i : stick_at)
                   for (int l = 0; l < B; ++l) {
                     const std::size_t q = i * kChunk + l;
-                    if (!zero[q]) continue;
-                    x[q] = x[q] + 0.5 * k2[q] * left[q] * left[q];
-                    v[q] = k2[q] * left[q];
+                    const double a = k2[q];
+                    if (crossed[q]) {
+                      x[q] = x[q] + 0.5 * a * left[q] * left[q];
+                      v[q] = a * left[q];
+                    } else if (held0[q] && !stuck[q]) {
+                      const double a0 = side[q] > 0.0 ? lim_p0[q] : lim_m0[q];
+                      const double tau = h * a / (a - a0);
+                      x[q] = x[q] + a * tau * tau / 6.0;
+                      v[q] = 0.5 * a * tau;
+                    }
                   }
               }
             }

@@ -274,7 +274,10 @@ def _rk4_stick_slip_here(g, U, Y, starts, steps):
     the switches taken from that side; a velocity that ends a step against the step's
     direction is set to 0, its position to x0 + h v0^2 / (2 (v0 - v1)), and the rest of the
     step, h v1 / (v1 - v0), is spent at rest or at the broken-away side's acceleration a from
-    the stop (x += a left^2 / 2, v = a left), by the same rule as at a step's start."""
+    the stop (x += a left^2 / 2, v = a left), by the same rule as at a step's start; a
+    coordinate held over a step that the end state no longer holds broke away where that
+    side's acceleration (a0 at the start, a at the end) crossed zero: tau = h a / (a - a0),
+    v = a tau / 2, x += a tau^2 / 6."""
     u_all, ex_all = g._inputs(U)
     tape, outs = g._trace(u_all, ex_all, {})
     series = np.column_stack(list(u_all.values()) + list(ex_all.values()))
@@ -296,6 +299,7 @@ def _rk4_stick_slip_here(g, U, Y, starts, steps):
             x0, v0 = x.copy(), v.copy()
             direction = np.sign(v)
             stuck = np.zeros((W, n), dtype=bool)
+            start_limits = np.zeros((W, n, 2))
             hold = {}
             zero = sticky[None, :] & (v == 0.0)
             if not zero.any():
@@ -313,6 +317,7 @@ def _rk4_stick_slip_here(g, U, Y, starts, steps):
                     a_m = acc(x, vm, hold_m)
                     for lane in np.flatnonzero(zero[:, c]):
                         ap, am = a_p[lane, c], a_m[lane, c]
+                        start_limits[lane, c] = ap, am
                         if ap <= 0.0 <= am:
                             lam = am / (am - ap) if am > ap else 0.5
                             w, stuck[lane, c], direction[lane, c] = 1.0 - lam, True, 0.0
@@ -346,31 +351,40 @@ def _rk4_stick_slip_here(g, U, Y, starts, steps):
                 left[lane, c] = -h * v[lane, c] / gap
                 v[lane, c] = 0.0
                 events["stopped"] += 1
-            if crossed.any():   # the rest of the step from the stop: stuck or broken away
-                vp = np.where(crossed, 1e-150, v)
+            ends = crossed | stuck
+            if ends.any():   # the step's end: the rest after a stop, a breakaway within a hold
+                vp = np.where(ends, 1e-150, v)
                 a_p = acc(x, vp, {})
-                a_rest = a_p.copy()
+                a_end = a_p.copy()
+                held_end = np.zeros((W, n), dtype=bool)
+                plus_end = np.zeros((W, n), dtype=bool)
                 for c in range(n):
-                    if not crossed[:, c].any():
+                    if not ends[:, c].any():
                         continue
                     vm = vp.copy()
-                    vm[crossed[:, c], c] = -1e-150
+                    vm[ends[:, c], c] = -1e-150
                     a_m = acc(x, vm, {})
-                    for lane in np.flatnonzero(crossed[:, c]):
+                    for lane in np.flatnonzero(ends[:, c]):
                         ap, am = a_p[lane, c], a_m[lane, c]
                         if ap <= 0.0 <= am:
                             w = 1.0 - (am / (am - ap) if am > ap else 0.5)
-                            a_rest[lane] = a_rest[lane] + w * (a_m[lane] - a_p[lane])
-                            a_rest[lane, c] = np.nan      # stuck: no acceleration
-                            events["stuck"] += 1
+                            held_end[lane, c] = True
                         else:
                             w = 0.0 if ap + am >= 0.0 else 1.0
-                            events["moved off"] += 1
-                            a_rest[lane] = a_rest[lane] + w * (a_m[lane] - a_p[lane])
-                for lane, c in zip(*np.nonzero(crossed)):
-                    a = 0.0 if np.isnan(a_rest[lane, c]) else a_rest[lane, c]
-                    x[lane, c] = x[lane, c] + 0.5 * a * left[lane, c] * left[lane, c]
-                    v[lane, c] = a * left[lane, c]
+                            plus_end[lane, c] = w == 0.0
+                        a_end[lane] = a_end[lane] + w * (a_m[lane] - a_p[lane])
+                for lane, c in zip(*np.nonzero(ends)):
+                    a = 0.0 if held_end[lane, c] else a_end[lane, c]
+                    if crossed[lane, c]:
+                        x[lane, c] = x[lane, c] + 0.5 * a * left[lane, c] * left[lane, c]
+                        v[lane, c] = a * left[lane, c]
+                        events["stuck" if held_end[lane, c] else "moved off"] += 1
+                    elif not held_end[lane, c]:      # broke away where its force crossed
+                        a0 = start_limits[lane, c, 0 if plus_end[lane, c] else 1]
+                        tau = h * a / (a - a0)
+                        x[lane, c] = x[lane, c] + a * tau * tau / 6.0
+                        v[lane, c] = 0.5 * a * tau
+                        events["moved off"] += 1
         out[j] = x
     return out, events
 

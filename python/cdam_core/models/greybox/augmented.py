@@ -409,7 +409,7 @@ class GreyBox(Model):
                     def at(vv, x=x, u=u, ex=ex, k=k, t=t):
                         a_ = acc(x, vv, u, ex, k, t, 0)
                         return a_, switches.values
-                    a1, held_values, stuck, side = ss.start(at, v, zero)
+                    a1, held_values, stuck, side, limits = ss.start(at, v, zero)
                     switches.values = held_values
                 else:
                     a1 = acc(x, v, u, ex, k, t, 0)
@@ -431,10 +431,12 @@ class GreyBox(Model):
                 v = v + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
                 if sticky.any():
                     x, v, cross, left = ss.stop(x0_, v0_, x, v, side, sticky, h)
-                    if cross.any():
-                        def at_stop(vv, x=x, u=u, ex=ex, k=k, t=t):
+                    held_over = stuck if stuck is not None else np.zeros_like(cross)
+                    if cross.any() or held_over.any():
+                        def at_end(vv, x=x, u=u, ex=ex, k=k, t=t):
                             return acc(x, vv, u, ex, k, t, 0), switches.values
-                        x, v = ss.restart(at_stop, x, v, cross, left)
+                        x, v = ss.finish(at_end, x, v, cross, left, held_over,
+                                         limits if stuck is not None else None, h)
             if not np.all(np.isfinite(x)) or np.max(np.abs(x), initial=0.0) > 1e9:
                 raise ValueError(f"prediction diverged at row {int(k[0]) + 1} of the segment")
             if path:

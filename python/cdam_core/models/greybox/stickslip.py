@@ -30,6 +30,10 @@ One mechanism, on the equations as written (the same for every model and effect)
   acceleration a: v = a (h - t*), x = x_stop + a (h - t*)^2 / 2 (a reversal through zero
   otherwise loses up to a step: a velocity error of a h, first order, measured 95 encoder
   counts over a 0.27 s window of the README joint).
+- *Held over a step*: at its end the rule is applied again; a coordinate the end state no
+  longer holds broke away within the step, where its net force crossed the level (linear
+  between the step's ends), so the motion depends continuously on the parameters
+  (:func:`finish`).
 
 Several coordinates at rest in one lane are tested each against the others' + limits (exact
 when the inertia matrix does not couple them, as for a joint's motor and link; a coupled
@@ -41,7 +45,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["LIMIT", "sticky_coordinates", "start", "stop", "restart"]
+__all__ = ["LIMIT", "sticky_coordinates", "start", "stop", "finish"]
 
 # The one-sided limit of a velocity at rest: any continuous term it enters (Dm v, v |v|) changes
 # by ~1e-150 of its coefficient, far below double precision of the forces; its square (1e-300)
@@ -79,12 +83,14 @@ def start(accel, v: np.ndarray, zero: np.ndarray):
 
     ``accel(v)`` returns (accelerations (W, n), switching values (list)) at the step's start
     positions and velocities ``v``. Returns (a1, switching values to hold over the step, stuck
-    (W, n) bool, side (W, n): +1 / -1 the direction of the step's motion, 0 stuck)."""
+    (W, n) bool, side (W, n): +1 / -1 the direction of the step's motion, 0 stuck, the one-sided
+    accelerations (a+, a-) of the coordinates at rest, each (W, n))."""
     vp = np.where(zero, LIMIT, v)
     ap, sp = accel(vp)
     a1, vals = ap, list(sp)
     stuck = np.zeros(zero.shape, dtype=bool)
     side = np.sign(v)
+    lim_p, lim_m = np.where(zero, ap, 0.0), np.zeros(zero.shape)
     for j in np.flatnonzero(zero.any(axis=0)):
         vm = vp.copy()
         vm[zero[:, j], j] = -LIMIT
@@ -99,8 +105,9 @@ def start(accel, v: np.ndarray, zero: np.ndarray):
         vals = [val + _lanes(w, val) * (_float(m) - _float(p))
                 for val, m, p in zip(vals, sm, sp)]
         stuck[:, j] = st
+        lim_m[:, j] = np.where(zero[:, j], amj, 0.0)
         side[:, j] = np.where(zero[:, j], np.where(st, 0.0, np.where(plus, 1.0, -1.0)), side[:, j])
-    return np.where(stuck, 0.0, a1), vals, stuck, side
+    return np.where(stuck, 0.0, a1), vals, stuck, side, (lim_p, lim_m)
 
 
 def stop(x0, v0, x, v, side, sticky, h: float):
@@ -110,16 +117,29 @@ def stop(x0, v0, x, v, side, sticky, h: float):
     the stop (W, n))."""
     cross = sticky[None, :] & (side * v < 0.0)
     if not cross.any():
-        return x, v, cross, None
+        return x, v, cross, np.zeros(v.shape)
     gap = np.where(cross, v0 - v, 1.0)
     x = np.where(cross, x0 + 0.5 * h * v0 * v0 / gap, x)
     left = np.where(cross, -h * v / gap, 0.0)
     return x, np.where(cross, 0.0, v), cross, left
 
 
-def restart(accel, x, v, cross, left):
-    """After a stop within a step: the rest of the step (``left``) from rest, stuck or broken
-    away by :func:`start`'s rule at the stop, at that side's constant acceleration. Returns
-    (x, v)."""
-    a, _, _, _ = start(accel, v, cross)
-    return (np.where(cross, x + 0.5 * a * left * left, x), np.where(cross, a * left, v))
+def finish(accel, x, v, cross, left, stuck, limits, h: float):
+    """The end of a step at the end state, by :func:`start`'s rule: a coordinate that stopped
+    within the step (``cross``, ``left`` the time after the stop) spends the rest of it at rest
+    or at its broken-away side's acceleration a (v = a left, x += a left^2 / 2); a coordinate
+    held over the step (``stuck``, with the step's start ``limits``) that the end state no
+    longer holds broke away within it: where that side's acceleration, a0 at the start and a
+    at the end, crossed zero (linearly), after which it rose to a: v = a tau / 2,
+    x += a tau^2 / 6, tau = h a / (a - a0). Breaking away at the step's end instead would
+    move the motion by a whole step as a parameter crosses the level (a jump in the windows
+    that output error differentiates). Returns (x, v)."""
+    a, _, held, side, _ = start(accel, v, cross | stuck)
+    go = stuck & ~held
+    if limits is None:
+        limits = (np.zeros(v.shape), np.zeros(v.shape))
+    a0 = np.where(side > 0.0, limits[0], limits[1])
+    tau = np.where(go, h * a / np.where(go, a - a0, 1.0), 0.0)
+    x = np.where(cross, x + 0.5 * a * left * left, np.where(go, x + a * tau * tau / 6.0, x))
+    v = np.where(cross, a * left, np.where(go, 0.5 * a * tau, v))
+    return x, v
