@@ -6,7 +6,11 @@
 // switching terms (sign and comparisons) evaluated once per step, at the step's start state,
 // and held over its four stages (the zero-order hold of a switching term, as a firmware step
 // takes it): RK4's stages would otherwise see -Fc, +Fc, -Fc, +Fc where the motion sticks and
-// their weights 1, 2, 2, 1 cancel the dry friction.
+// their weights 1, 2, 2, 1 cancel the dry friction. In RK4 the coordinates flagged `sticky`
+// (a switching term jumps at their zero velocity: a dry friction) stick and slip as
+// models/greybox/stickslip.py describes and computes (the same operations in the same order):
+// a motion that would cross zero stops there, a coordinate at rest stays while its friction
+// can hold it (Filippov's weights between the two one-sided fields) and breaks away otherwise.
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 
@@ -406,7 +410,8 @@ void register_greybox(py::module_& m) {
       py::arg("starts"), py::arg("steps"), py::arg("substeps"), py::arg("rk4"), py::arg("dt"),
       py::arg("t_start"), py::arg("path"), py::arg("sticky") = py::array_t<int>(0),
       "Integrate a grey-box model given as a tape (models/greybox/trace.py) over every lane "
-      "(rk4: the switching nodes, sign and comparisons, held over each step's stages); "
+      "(rk4: the switching nodes, sign and comparisons, held over each step's stages; the "
+      "coordinates flagged in `sticky` stick and slip, models/greybox/stickslip.py); "
       "returns (positions, diverged row or -1): (steps, lanes, positions) with path, else "
       "(lanes, positions).");
 }
