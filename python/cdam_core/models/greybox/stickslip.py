@@ -29,7 +29,7 @@ One mechanism, on the equations as written (the same for every model and effect)
   spent at rest or, where the rule above breaks the coordinate away there, at that side's
   acceleration a: v = a (h - t*), x = x_stop + a (h - t*)^2 / 2 (a reversal through zero
   otherwise loses up to a step, a velocity error of a h: measured on the README's joint, the
-  true parameters' held-out window error was 2.1e-5 without this rest of the step, 6.8e-7
+  true parameters' held-out window error was 2.1e-5 without this rest of the step, 6.9e-7
   with it, 7.6e-7 with the plain sign held over the step).
 - *Held over a step*: at its end the rule is applied again; a coordinate the end state no
   longer holds broke away within the step, where its net force crossed the level (linear
