@@ -14,8 +14,9 @@ One mechanism, on the equations as written (the same for every model and effect)
   the other velocities away from zero (:func:`sticky_coordinates`): a force that jumps at
   v_j = 0. A switching term of a relative velocity (v_j - v_k) does not make j stick.
 - *At rest* (v_j exactly 0 at a step's start): the accelerations are evaluated with v_j at its
-  two one-sided limits (v_j = +-:data:`LIMIT`, the smallest speed whose continuous terms are
-  below double precision of every other term: only the switching terms see its sign), a+ and
+  two one-sided limits (v_j = +-:data:`LIMIT`, a speed so small that the continuous terms it
+  enters stay below double precision of every other term: only the switching terms see its
+  sign), a+ and
   a-. If a+_j <= 0 <= a-_j the friction can hold the coordinate (Filippov's convex combination
   of the two sides' fields tangent to v_j = 0): the coordinate stays at rest over the step
   (its velocity and acceleration 0 at every stage) and the rest of the system moves under the
