@@ -67,6 +67,10 @@ MIN_WINDOWS = 10   # fewer paired windows cannot reach a one-sided 1 % level (2^
 # Im +0.40 %, Dl 0.00 %, Kd -0.8 %, Fc -0.6 %).
 WINDOW_INTEGRATOR = "rk4"
 
+# the windows' initial-state fit: singular values below this share of the largest are not
+# resolved by the forward-difference sensitivities (sqrt of the machine epsilon; _shooting)
+STATE_FIT_RCOND = float(np.sqrt(np.finfo(float).eps))
+
 
 def midpoint(u) -> np.ndarray:
     """(u_k + u_k+1) / 2, the last sample kept: a continuous input sampled at t_k, held over
@@ -404,9 +408,12 @@ class BlockedCV:
             S = (P[:, j, 1:] - P[:, j, :1]) * scale / steps[None, :, None, None]  # (H, 2m, W, m)
             A = np.transpose(S, (2, 0, 3, 1)).reshape(W, H * m, 2 * m)
             b = np.transpose(r, (1, 0, 2)).reshape(W, H * m, 1)
-            # least squares per window, batched (numpy.linalg.lstsq's default singular-value
-            # cut)
-            res = b - A @ (np.linalg.pinv(A, rcond=np.finfo(float).eps * max(A.shape[1:])) @ b)
+            # least squares per window, batched; the singular-value cut is the forward
+            # differences' resolution (sqrt(eps) of the largest: a difference quotient is at
+            # best that accurate), not numpy.linalg.lstsq's eps: a state direction the window
+            # does not respond to (a motor held by dry friction) is otherwise fitted on
+            # round-off, and the window error jumps as a parameter moves by 1e-8
+            res = b - A @ (np.linalg.pinv(A, rcond=STATE_FIT_RCOND) @ b)
             out[j] = res[..., 0] if samples else np.sum(res[..., 0] ** 2, axis=1) / (H * m)
         return out if thetas is not None else out[0]
 
