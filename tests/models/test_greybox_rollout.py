@@ -129,7 +129,7 @@ def _numpy_only(g):
 
 
 @pytest.mark.parametrize("case", ["axis", "joint"])
-@pytest.mark.parametrize("integrator", ["euler", "rk4"])
+@pytest.mark.parametrize("integrator", ["euler", "rk4", "rk4-stickslip"])
 def test_compiled_rollout_equals_numpy(case, integrator, request):
     from cdam_core import _core
     assert hasattr(_core, "greybox_rollout"), "the extension lacks greybox_rollout: rebuild it"
@@ -404,7 +404,7 @@ def test_rk4_stick_slip_as_written_here(case, request):
     if case != "joint":     # the open-loop joint's motor never comes to rest in its windows
         assert min(events.values()) >= 3, events
     for h in (g, _numpy_only(g)):
-        got = h.windows(U, Y, starts, 40, integrator="rk4")
+        got = h.windows(U, Y, starts, 40, integrator="rk4-stickslip")
         np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-12)
 
 
@@ -432,6 +432,20 @@ def _exact_stick_slip(u, dt, M, Fv, Fc, x0=0.0, v0=0.0):
             left -= t
         x[k + 1], v[k + 1] = xx, vv
     return x, v
+
+
+def _held_from(u, dt, M, Fv, Fc, x0, v0):
+    """The sign of v held over each sample, solved exactly per sample from (x0, v0) at the
+    first row of ``u``."""
+    a = Fv / M
+    n = len(u)
+    xs, vs = np.zeros(n), np.zeros(n)
+    xs[0], vs[0] = x0, v0
+    for k in range(n - 1):
+        vinf = (u[k] - Fc * np.sign(vs[k])) / Fv
+        xs[k + 1] = xs[k] + vinf * dt + (vs[k] - vinf) * (1 - np.exp(-a * dt)) / a
+        vs[k + 1] = vinf + (vs[k] - vinf) * np.exp(-a * dt)
+    return xs
 
 
 @pytest.mark.parametrize("force", ["sticks", "reverses"])
@@ -462,12 +476,7 @@ def test_rk4_stick_slip_against_the_exact_solution(force):
         assert np.sum(np.diff((v == 0.0).astype(int)) == 1) >= 5      # stops
     else:
         assert np.mean(v == 0.0) < 0.01 and np.sum(moving[1:] != moving[:-1]) >= 10
-    a = Fv / M
-    xs, vs = np.zeros(n), np.zeros(n)       # the sign held over each sample, exactly
-    for k in range(n - 1):
-        vinf = (u[k] - Fc * np.sign(vs[k])) / Fv
-        xs[k + 1] = xs[k] + vinf * dt + (vs[k] - vinf) * (1 - np.exp(-a * dt)) / a
-        vs[k + 1] = vinf + (vs[k] - vinf) * np.exp(-a * dt)
+    xs = _held_from(u, dt, M, Fv, Fc, 0.0, 0.0)
     starts = np.array([1, 700, 1500])
     rows = starts[None, :] + np.arange(1, 1201)[:, None]
     span = np.ptp(x)
@@ -479,9 +488,16 @@ def test_rk4_stick_slip_against_the_exact_solution(force):
                {}, ["M", "Fv", "coulomb_friction@tau.Fc"], 1, 1, substeps=substeps)
         for h in (g, _numpy_only(g)):
             got = h.windows(u[:, None], x[:, None], starts, 1200, x[starts][:, None],
-                            v[starts][:, None], integrator="rk4")[:, :, 0]
+                            v[starts][:, None], integrator="rk4-stickslip")[:, :, 0]
             np.testing.assert_allclose(got, x[rows], rtol=0, atol=tl * span,
                                        err_msg=f"substeps {substeps}, compiled {h.compiled}")
+            # the held rollout ("rk4", the other choice) is the sign held over each step
+            if substeps == 1:
+                held = h.windows(u[:, None], x[:, None], starts, 1200, x[starts][:, None],
+                                 v[starts][:, None], integrator="rk4")[:, :, 0]
+                xh = np.column_stack([_held_from(u[s:], dt, M, Fv, Fc, x[s], v[s])[1:1201]
+                                      for s in starts])
+                np.testing.assert_allclose(held, xh, rtol=0, atol=1e-6 * span)
 
 
 def test_which_coordinates_stick():

@@ -31,11 +31,13 @@ information criterion: a structure is kept only when it predicts held-out data b
 """
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 
 import numpy as np
 from scipy import stats
 
+from cdam_core.models.greybox.augmented import INTEGRATORS
 from cdam_core.models.greybox.estimation import design, fit
 from cdam_core.residual.benchmark import greybox_of
 from cdam_core.residual.instrumental import iv_fit
@@ -68,7 +70,8 @@ MIN_WINDOWS = 10   # fewer paired windows cannot reach a one-sided 1 % level (2^
 WINDOW_INTEGRATOR = "rk4"
 
 # the windows' initial-state fit: singular values below this share of the largest are not
-# resolved by the forward-difference sensitivities (sqrt of the machine epsilon; _shooting)
+# resolved by the forward-difference sensitivities (sqrt of the machine epsilon; _shooting);
+# None: numpy.linalg.lstsq's default cut (eps times the larger dimension)
 STATE_FIT_RCOND = float(np.sqrt(np.finfo(float).eps))
 
 
@@ -154,8 +157,9 @@ class BlockedCV:
                  integrator: str = WINDOW_INTEGRATOR, criterion: str | None = None):
         if criterion not in (None, "simulation", "equation"):
             raise ValueError(f"criterion: expected 'simulation' or 'equation', got {criterion!r}")
-        if integrator not in ("euler", "rk4"):
-            raise ValueError(f"integrator: expected 'euler' or 'rk4', got {integrator!r}")
+        if integrator not in INTEGRATORS:
+            raise ValueError(f"integrator: expected one of {', '.join(INTEGRATORS)}, got "
+                             f"{integrator!r}")
         self.integrator = integrator
         self.model, self.sig, self.trim = model, sig, int(trim)
         n = np.asarray(sig["t"]).size
@@ -201,6 +205,18 @@ class BlockedCV:
             if not self.declared_window_score < 1.0:
                 self.criterion = "equation"
 
+    def with_integrator(self, integrator: str) -> "BlockedCV":
+        """The same windows, blocks, normalisation and criterion, simulated by another of the
+        rollout's ``integrator`` values (the held rollout "rk4" against "rk4-stickslip":
+        :func:`cdam_core.residual.selection.choose_stick_slip`); its own caches."""
+        if integrator not in INTEGRATORS:
+            raise ValueError(f"integrator: expected one of {', '.join(INTEGRATORS)}, got "
+                             f"{integrator!r}")
+        out = copy.copy(self)
+        out.integrator = integrator
+        out._cache, out._folds = {}, {}
+        return out
+
     def inputs(self, effects) -> np.ndarray:
         """The record's input columns for a structure (the model's inputs, then the measured
         columns its effects read), as ``GreyBox`` takes them. Under the "sampled" timing (a
@@ -209,7 +225,7 @@ class BlockedCV:
         delays the input by half a sample (see :func:`midpoint`)."""
         m, s = self.model, self.sig
         cols = [np.asarray(s[c], dtype=float) for c in m.inputs]
-        if s.get("timing") == "sampled" and self.integrator == "rk4":
+        if s.get("timing") == "sampled" and self.integrator != "euler":
             cols = [midpoint(c) for c in cols]
         cols += [np.asarray(s["extra"][e.column], dtype=float) for e in effects
                  if getattr(e, "column", "")]
@@ -413,7 +429,9 @@ class BlockedCV:
             # best that accurate), not numpy.linalg.lstsq's eps: a state direction the window
             # does not respond to (a motor held by dry friction) is otherwise fitted on
             # round-off, and the window error jumps as a parameter moves by 1e-8
-            res = b - A @ (np.linalg.pinv(A, rcond=STATE_FIT_RCOND) @ b)
+            rcond = STATE_FIT_RCOND if STATE_FIT_RCOND is not None else \
+                np.finfo(float).eps * max(A.shape[1:])
+            res = b - A @ (np.linalg.pinv(A, rcond=rcond) @ b)
             out[j] = res[..., 0] if samples else np.sum(res[..., 0] ** 2, axis=1) / (H * m)
         return out if thetas is not None else out[0]
 
@@ -446,7 +464,9 @@ class BlockedCV:
                 "folds": self.folds, "horizon_samples": self.horizon,
                 "horizon_s": self.horizon * self.dt, "guard_samples": self.guard,
                 "integrator": {"euler": "semi-implicit Euler (the model's own)",
-                               "rk4": "Runge-Kutta 4, inputs held over the sample"}[
+                               "rk4": "Runge-Kutta 4, inputs held over the sample",
+                               "rk4-stickslip": "Runge-Kutta 4, inputs held over the sample, "
+                                                "dry friction sticking and slipping"}[
                                    self.integrator],
                 "test": "one-sided Wilcoxon signed-rank on paired window errors, "
                         "Bonferroni over the structures tried"}

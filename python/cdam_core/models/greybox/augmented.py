@@ -38,6 +38,9 @@ from cdam_core.models.protocol import Model
 __all__ = ["GreyBox"]
 
 MAX_SUBSTEPS = 10000
+# the rollout's integrators (GreyBox._rollout): the model kind's semi-implicit Euler, RK4 with
+# a dry friction's sign held over each step, RK4 with the dry friction's stick-slip
+INTEGRATORS = ("euler", "rk4", "rk4-stickslip")
 
 
 def _effect_to_dict(e: Effect) -> dict:
@@ -341,9 +344,10 @@ class GreyBox(Model):
         stages see -Fc, +Fc, -Fc, +Fc and RK4's weights 1, 2, 2, 1 cancel the friction); a
         velocity coordinate whose switching terms jump at its zero (a dry friction) stops at
         zero, holds there while the friction can hold it and breaks away in the direction of
-        the net force otherwise (stick-slip, :mod:`.stickslip`: a held sign alone carries the
-        motion through zero and chatters where the motor sticks). Always on in "rk4": it is
-        the dry friction's physics, not a choice; "euler" (saved models, firmware) has no
+        the net force otherwise in "rk4-stickslip" (stick-slip, :mod:`.stickslip`: a held
+        sign alone carries the motion through zero and chatters where the motor sticks). Which
+        of "rk4" and "rk4-stickslip" a record's windows use is decided on held-out data
+        (:mod:`cdam_core.residual.selection`); "euler" (saved models, firmware) has no
         stick-slip.
         ``thetas``: (G, parameters) values in the order of ``theta_``, the W lanes split into G
         consecutive groups, each simulated with its own parameters (batched perturbations).
@@ -351,8 +355,9 @@ class GreyBox(Model):
         The equations run compiled (``_core.greybox_rollout`` on the tape that
         :mod:`.trace` records from them) when the extension has it and the tape agrees with
         the numpy equations on the first states; otherwise in numpy, one step at a time."""
-        if integrator not in ("euler", "rk4"):
-            raise ValueError(f"integrator: expected 'euler' or 'rk4', got {integrator!r}")
+        if integrator not in INTEGRATORS:
+            raise ValueError(f"integrator: expected one of {', '.join(INTEGRATORS)}, got "
+                             f"{integrator!r}")
         u_all, ex_all = self._inputs(U)
         pre_all = self._precomputed(U, Y) if pre is None else pre
         dt = float(self.dt)
@@ -366,7 +371,8 @@ class GreyBox(Model):
             if th.shape[1] != len(names) or x.shape[0] % th.shape[0]:
                 raise ValueError("thetas: expected (groups, parameters), lanes a multiple of groups")
         inv = self._inverses(th, names)
-        sticky = self._sticky(u_all, ex_all, pre_all) if integrator == "rk4" else None
+        sticky = self._sticky(u_all, ex_all, pre_all) if integrator == "rk4-stickslip" \
+            else None
         fast = self._compiled(u_all, ex_all, pre_all)
         if fast is not None:
             out = self._rollout_compiled(fast, u_all, ex_all, pre_all, starts, steps, path, x, v,
@@ -403,7 +409,7 @@ class GreyBox(Model):
                     v = v + h * acc(x, v, u, ex, k, t)
                     x = x + h * v
                     continue
-                zero = sticky[None, :] & (v == 0.0)
+                zero = sticky[None, :] & (v == 0.0) if sticky is not None else v != v
                 stuck = None
                 if zero.any():      # coordinates at rest: stick or break away (stickslip)
                     def at(vv, x=x, u=u, ex=ex, k=k, t=t):
@@ -429,7 +435,7 @@ class GreyBox(Model):
                     a4 = np.where(stuck, 0.0, a4)
                 x = x + h / 6.0 * (v + 2.0 * v2 + 2.0 * v3 + v4)
                 v = v + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
-                if sticky.any():
+                if sticky is not None and sticky.any():
                     x, v, cross, left = ss.stop(x0_, v0_, x, v, side, sticky, h)
                     held_over = stuck if stuck is not None else np.zeros_like(cross)
                     if cross.any() or held_over.any():
@@ -567,7 +573,7 @@ class GreyBox(Model):
         if not state["ok"]:
             return None
         P, diverged = run(op, a, b, c, outs, series, th, inv, x, v, st, int(steps),
-                          int(self.substeps_), integrator == "rk4", float(self.dt),
+                          int(self.substeps_), integrator != "euler", float(self.dt),
                           float(t_start), bool(path),
                           np.zeros(0, dtype=np.int32) if sticky is None
                           else sticky.astype(np.int32))
@@ -607,9 +613,11 @@ class GreyBox(Model):
         (steps, len(starts), outputs) of rows ``start + 1 .. start + steps``.
 
         ``integrator``: "euler" (default: the model kind's semi-implicit Euler, what a saved
-        model and the firmware run; its timing error is half a substep) or "rk4" (Runge-Kutta
+        model and the firmware run; its timing error is half a substep), "rk4" (Runge-Kutta
         4 with the inputs held over the sample: a window's integration error far below the
-        half-sample effects its scores may decide on, see :meth:`_choose_substeps`).
+        half-sample effects its scores may decide on, see :meth:`_choose_substeps`; a dry
+        friction's sign held over each step) or "rk4-stickslip" (the same, a dry friction
+        sticking and slipping: :meth:`_rollout`).
         ``thetas``: (G, parameters) in the order of :meth:`parameters`; the windows are split
         into G consecutive groups, each simulated with its own parameter values (a batched
         finite-difference Jacobian).
