@@ -597,7 +597,7 @@ def select(model, sig: dict, candidates, alpha: float = 0.01, max_steps: int | N
         if stick_slip == "on":
             stick["warning"] = "stick-slip given (on) but not applicable here"
     if simulated and estimator != "idim-ls":
-        chosen["windows_integrator"] = cv_used.describe()["integrator"]
+        chosen["windows_integrator"] = cv.describe()["integrator"]   # the estimators' test
         path = [("declared model", declared.effects, model0)] + [
             (f"after {st.candidate.effect.key}", st.candidate.fit.effects, model0)
             for st in steps]
