@@ -40,8 +40,12 @@ One mechanism, on the equations as written (the same for every model and effect)
 Several coordinates at rest in one lane are tested each against the others' + limits (exact
 when the inertia matrix does not couple them, as for a joint's motor and link; a coupled
 multi-contact stick would need a complementarity solve). The model kind's semi-implicit Euler
-(saved models, firmware) does not use this; it is the RK4 windows' (output error, IDIM-IV's
-auxiliary model, held-out validation).
+(saved models, firmware) does not use this; it is the "rk4-stickslip" rollout of the windows
+(output error, IDIM-IV's auxiliary model, held-out validation), which a record's analysis
+takes instead of "rk4" (the sign held over each step) only where the chosen model predicts
+held-out windows better with it (:func:`cdam_core.residual.selection.choose_stick_slip`:
+simulated in every window of every decision, session 9, it lost a friction finding and
+doubled a friction error on other seeds of the README's joint record).
 """
 from __future__ import annotations
 
