@@ -66,7 +66,9 @@ MIN_WINDOWS = 10   # fewer paired windows cannot reach a one-sided 1 % level (2^
 # where the motion sticks, and session 7 fell back to Euler windows for such models (generator
 # condition C, link PD at 250 Hz with dry friction, output error on Euler windows: Im +4.84 %,
 # Dl -2.37 %; on RK4 windows with the held sign and output error on every window sample:
-# Im +0.40 %, Dl 0.00 %, Kd -0.8 %, Fc -0.6 %).
+# Im +0.40 %, Dl 0.00 %, Kd -0.8 %, Fc -0.6 %). The chosen model's windows take the dry
+# friction's stick-slip instead ("rk4-stickslip") where that predicts held-out windows better
+# (selection.choose_stick_slip; condition C: p 9e-11, Im -0.01 %, Kd -0.34 %, Fc -0.2 %).
 WINDOW_INTEGRATOR = "rk4"
 
 # the windows' initial-state fit: singular values below this share of the largest are not
