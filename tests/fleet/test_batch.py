@@ -165,6 +165,8 @@ def test_derived_seeds_come_from_the_task_alone(folder):
     ({"command": "residual", "records": "recs/*.csv",
       "options": {"model": "rigid_axis", "estimator": "ols"}}, "spec.options.estimator"),
     ({"command": "residual", "records": "recs/*.csv",
+      "options": {"model": "rigid_axis", "stick_slip": True}}, "spec.options.stick_slip"),
+    ({"command": "residual", "records": "recs/*.csv",
       "options": {"model": "rigid_axis", "output_error": True, "estimator": "idim-ls"}},
      "spec.options.output_error"),
 ])

@@ -129,9 +129,9 @@ class Joint:
 
 
 def rigid_axis(fs=1000.0, duration=20.0, M=0.5, Fv=2.0, Fc=1.0, offset=0.0, counts=0,
-               noise=0.0, seed=0) -> dict:
+               noise=0.0, seed=0, bias=0.0) -> dict:
     """A rigid axis M q'' + Fv q' + Fc tanh(q' / 1 mrad/s) + offset = tau, open-loop multisine
-    torque held over each sample, RK4 on a fine grid."""
+    torque (plus a constant ``bias``) held over each sample, RK4 on a fine grid."""
     rng = np.random.default_rng(seed)
     dt = 1.0 / fs
     n = int(round(duration * fs))
@@ -139,6 +139,7 @@ def rigid_axis(fs=1000.0, duration=20.0, M=0.5, Fv=2.0, Fc=1.0, offset=0.0, coun
     freqs = np.array([0.3, 0.7, 1.3, 3.1, 6.0])
     ph = rng.uniform(0, 2 * np.pi, freqs.size)
     u = np.sum(3.0 * np.sin(2 * np.pi * freqs[None, :] * t[:, None] + ph) / (1 + freqs), axis=1)
+    u = u + bias
 
     def f(x, uk):
         return np.array([x[1], (uk - offset - Fv * x[1] - Fc * np.tanh(x[1] / 1e-3)) / M])

@@ -235,3 +235,27 @@ def test_cli_estimator_pinned_forced_and_refused(tmp_path, capsys):
                         "idim-iv"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err == ["cdam residual: error: --output-error: conflicts with --estimator idim-iv"]
+
+
+def test_cli_stick_slip_given_and_refused(tmp_path, capsys):
+    """--stick-slip on / off: the chosen model's windows with or without the dry friction's
+    stick-slip, given (said in the JSON, nothing tested); a value other than auto, on or off
+    is refused on one line (exit 2)."""
+    rec = rigid_axis_record(seed=2, Fc=1.5, duration=6.0)
+    _csv(tmp_path / "r.csv", rec)
+    base = ["residual", str(tmp_path / "r.csv"), "--model", "rigid_axis", "--map",
+            "tau=force,q=pos", "--no-free-run", "--quiet", "--estimator", "idim-ls", "--json"]
+    for given, chosen in (("on", "stick-slip"), ("off", "held")):
+        assert main(base + [str(tmp_path / f"{given}.json"), "--stick-slip", given]) == 0
+        js = json.loads((tmp_path / f"{given}.json").read_text())
+        assert js["findings"][0]["effect"] == "coulomb_friction"
+        ss = js["settings"]["stick_slip"]
+        assert ss == {**ss, "chosen": chosen, "rule": f"given ({given})",
+                      "sticky_positions": ["q"]} and "validation" not in ss
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exc:
+        main(base + [str(tmp_path / "x.json"), "--stick-slip", "sometimes"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1] == ("cdam residual: error: argument --stick-slip: invalid choice: "
+                       "'sometimes' (choose from 'auto', 'on', 'off')")

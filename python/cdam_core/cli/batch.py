@@ -26,7 +26,7 @@ SPEC_HELP = """spec (JSON):
    "options": {"hidden": 20, "narx": [2, 2, 1], "epochs": 50, ...}}
 residual: options.model (rigid_axis, flexible_joint, quadrotor, aerial_manipulator), map,
 fixed, inputs, outputs, cutoff, alpha, free_run, estimator (auto, idim-ls, idim-iv, oe,
-sim; output_error: true is estimator oe) (cdam residual's).
+sim; output_error: true is estimator oe), stick_slip (auto, on, off) (cdam residual's).
 See cdam_core.fleet.spec for every option.
 
 example, cdam paper --seeds 10 as one batch (90 tasks; same figures):

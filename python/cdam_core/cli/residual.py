@@ -104,6 +104,7 @@ def run(args) -> int:
         sel = analyse(args.model, ds.t, signals, extra=extra or None, cutoff_hz=args.cutoff,
                       alpha=args.alpha, free_run=not args.no_free_run, fixed=fixed or None,
                       declared=declared, keep_terms=terms, estimator=_estimator(args),
+                      stick_slip=args.stick_slip,
                       timing=args.timing)
     js = to_json(sel)
     js["source"] = str(args.data)
@@ -247,6 +248,10 @@ def _summary(js: dict) -> list[str]:
         out.append(f"derivative cut-off: {cut:.3g} Hz")
     if (est := st.get("estimator")) and "chosen" in est:
         out.append(f"estimator: {est['chosen']}")
+    if (ss := st.get("stick_slip")) and ss.get("sticky_positions"):
+        p = (ss.get("validation") or {}).get("p_value")
+        out.append(f"validation windows' dry friction: {ss['chosen']}"
+                   + (f" (stick-slip p {p:.2g})" if p is not None else f" ({ss['rule']})"))
     std = js.get("final_std") or {}
     out.append("final parameters (value, relative sigma):")
     for k, v in (js.get("final_parameters") or {}).items():
@@ -315,6 +320,13 @@ def register(subparsers) -> None:
                         "(faster); idim-iv, oe or sim (simulation error over whole runs of the "
                         "record) forces one "
                         "(default: %(default)s)")
+    p.add_argument("--stick-slip", choices=("auto", "on", "off"), default="auto",
+                   help="the chosen model's Runge-Kutta validation windows (rigid_axis, "
+                        "flexible_joint): a dry friction stops the motion at zero speed and "
+                        "holds it while the rest of the force is inside its level (on), or its "
+                        "sign is held over each step (off); auto keeps stick-slip only if it "
+                        "predicts held-out windows better (the comparison and its p-value are "
+                        "reported; default: %(default)s)")
     p.add_argument("--output-error", action="store_true",
                    help="force the output-error refinement: the same as --estimator oe")
     p.add_argument("--cutoff", type=float, default=None,

@@ -70,7 +70,7 @@ OPTIONS = {
 # residual: `cdam residual`'s options ("map" and "fixed" as JSON objects, "inputs" a list)
 RESIDUAL_OPTIONS = {"model": None, "inputs": None, "outputs": None, "map": None, "fixed": None,
                     "cutoff": None, "alpha": 0.01, "free_run": True, "estimator": "auto",
-                    "output_error": False}
+                    "output_error": False, "stick_slip": "auto"}
 RESIDUAL_MODELS = ("rigid_axis", "flexible_joint", "quadrotor", "aerial_manipulator")
 # paper: option -> PaperConfig field (defaults: PaperConfig's, except threads: 1, as identify's
 # tasks, since the workers already fill the cores)
@@ -281,6 +281,9 @@ def _residual_options(options: dict) -> dict:
     if opts["estimator"] not in ("auto", "idim-ls", "idim-iv", "oe", "sim"):
         raise ValueError(f"spec.options.estimator: expected auto, idim-ls, idim-iv, oe or sim, got "
                          f"{opts['estimator']!r}")
+    if opts["stick_slip"] not in ("auto", "on", "off"):
+        raise ValueError(f"spec.options.stick_slip: expected auto, on or off, got "
+                         f"{opts['stick_slip']!r}")
     if opts["output_error"]:   # the older spelling of estimator "oe"
         if opts["estimator"] not in ("auto", "oe"):
             raise ValueError(f"spec.options.output_error: conflicts with estimator "

@@ -291,7 +291,8 @@ def _residual(task: Task):
     sel = analyse(o["model"], ds.t, signals, extra=extra or None, cutoff_hz=o["cutoff"],
                   alpha=o["alpha"], free_run=o["free_run"], fixed=o["fixed"] or None,
                   declared=declared, keep_terms=list(model_meta.get("terms") or []),
-                  estimator=o.get("estimator", "auto"))
+                  estimator=o.get("estimator", "auto"),
+                  stick_slip=o.get("stick_slip", "auto"))
     js = to_json(sel)
     metrics = {"effects_found": len(js["findings"]),
                "effects": ",".join(f"{f['effect']}@{f['channel']}" for f in js["findings"]),

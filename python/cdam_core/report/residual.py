@@ -265,6 +265,14 @@ def write_report(sel: Selection, out_dir, title: str | None = None, source: str 
                       f"{alts})."]
     elif str(est.get("rule", "")).startswith("given"):
         lines += ["", f"Estimator: {est['chosen']} ({est['rule']})."]
+    stick = sel.settings.get("stick_slip") or {}
+    if stick.get("sticky_positions"):
+        v = stick.get("validation")
+        lines += ["", f"Validation windows' dry friction (on {', '.join(stick['sticky_positions'])}): "
+                      f"{stick['chosen']} ({stick['rule']}"
+                  + (f"; mean held-out error with stick-slip {v['score_rich']:.3g} against "
+                     f"{v['score_simple']:.3g} held, p {v['p_value']:.2g} at level "
+                     f"{v['level']:.2g}" if v else "") + ")."]
     frc = est.get("free_run_check") or {}
     if frc.get("earlier"):
         lines += ["", "Free runs of held-out blocks (each fold's model, its state fitted on the "

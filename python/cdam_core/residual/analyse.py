@@ -6,7 +6,8 @@ from cdam_core.residual.cutoff import at_rest, choose_cutoff
 from cdam_core.residual.identifiability import deflection_check
 from cdam_core.models.greybox.registry import get_model
 from cdam_core.models.greybox.effects import LIBRARY, candidates as library_candidates
-from cdam_core.residual.selection import ESTIMATOR_CHOICES, Selection, select
+from cdam_core.residual.selection import (ESTIMATOR_CHOICES, STICK_SLIP_CHOICES, Selection,
+                                          select)
 from cdam_core.residual.timing import choose_timing
 
 __all__ = ["analyse"]
@@ -16,7 +17,8 @@ def analyse(model: str, t, signals: dict, extra: dict | None = None, fixed: dict
             cutoff_hz: float | None = None, alpha: float = 0.01, free_run: bool = True,
             validation: tuple | None = None, options: dict | None = None,
             max_steps: int | None = None, declared=(), keep_terms=(),
-            estimator: str = "auto", timing: str = "auto") -> Selection:
+            estimator: str = "auto", timing: str = "auto",
+            stick_slip: str = "auto") -> Selection:
     """Fit ``model`` to the signals, select missing effects, return the :class:`Selection`.
 
     ``signals`` maps the model's signal names (``tau``, ``q`` / ``tau_m``, ``theta_m``, ``q`` /
@@ -27,7 +29,10 @@ def analyse(model: str, t, signals: dict, extra: dict | None = None, fixed: dict
     model already holds (on every channel they apply to), e.g. the sidecar's model effects;
     ``estimator``: "auto" (IDIM-LS, IDIM-IV or the output-error refinement, chosen on held-out
     windows), "idim-ls" (the others not tried: cheaper), "idim-iv", "oe" or "sim" (forced);
-    the choice and its evidence are in ``settings["estimator"]``;
+    the choice and its evidence are in ``settings["estimator"]``; ``stick_slip``: "auto"
+    (the chosen model's RK4 windows simulate the dry friction's stick-slip only where that
+    predicts held-out windows better than its sign held over each step), "on" or "off"
+    (given); the choice and its evidence are in ``settings["stick_slip"]``;
     ``keep_terms``: optional declared terms (``offset``, ``G``, ``Kd``) kept even when the
     held-out data do not support them (a sidecar that declares them);
     ``timing``: "auto" (chosen from the record on held-out blocks,
@@ -44,6 +49,9 @@ def analyse(model: str, t, signals: dict, extra: dict | None = None, fixed: dict
     if estimator not in ESTIMATOR_CHOICES:
         raise ValueError(f"estimator: expected one of {', '.join(ESTIMATOR_CHOICES)}, "
                          f"got {estimator!r}")
+    if stick_slip not in STICK_SLIP_CHOICES:
+        raise ValueError(f"stick_slip: expected one of {', '.join(STICK_SLIP_CHOICES)}, "
+                         f"got {stick_slip!r}")
     m = get_model(model, fixed)
     keep_terms = [keep_terms] if isinstance(keep_terms, str) else list(keep_terms)
     unknown = [p for p in keep_terms if p not in m.parameter_names]
@@ -101,6 +109,7 @@ def analyse(model: str, t, signals: dict, extra: dict | None = None, fixed: dict
             motor = {"tau": signals[m.inputs[0]], "q": signals["theta_m"]}
             sel = analyse("rigid_axis", t, motor, extra, None, None, alpha, free_run,
                           None, options, max_steps, declared, estimator=estimator,
+                          stick_slip=stick_slip,
                           timing=timing_info["chosen"] if timing_info["rule"] == "given"
                           else "auto")
             sel.settings["identifiability"] = {
@@ -112,7 +121,7 @@ def analyse(model: str, t, signals: dict, extra: dict | None = None, fixed: dict
         val = m.prepare(validation[0], validation[1], sig["filter"], None, timing)
     sel = select(m, sig, cands, alpha=alpha, free_run=free_run, validation=val,
                  max_steps=max_steps, declared_effects=dec, trim=trim, keep_terms=keep_terms,
-                 estimator=estimator)
+                 estimator=estimator, stick_slip=stick_slip)
     sel.settings["filter_choice"] = choice
     sel.settings["timing"] = timing_info
     if check is not None:

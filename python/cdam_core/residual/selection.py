@@ -32,7 +32,7 @@ from cdam_core.models.greybox.freerun import free_run_error
 from cdam_core.residual.benchmark import greybox_of
 from cdam_core.residual.instrumental import iv_fit
 from cdam_core.residual.output_error import refined_fit
-from cdam_core.residual.validation import BlockedCV
+from cdam_core.residual.validation import BlockedCV, paired
 
 
 @dataclass
@@ -343,6 +343,67 @@ def _choose_estimator(model, sig, current: Fit, cv, alpha: float, trim: int,
     return f, out
 
 
+# the ``stick_slip`` argument: "auto" decides on held-out windows, "on" / "off" force it
+STICK_SLIP_CHOICES = ("auto", "on", "off")
+
+
+def _sticky_positions(f: Fit, cv) -> list:
+    """The positions whose velocity a dry friction of ``f``'s structure can stop (the
+    switching terms jump at its zero: :func:`cdam_core.models.greybox.stickslip.
+    sticky_coordinates`)."""
+    g = greybox_of(f, cv.dt)
+    U = cv.inputs(f.effects)
+    flags = g._sticky(*g._inputs(U), {})
+    return [p for p, s in zip(f.model.positions, flags) if s]
+
+
+def choose_stick_slip(model, sig, idim: Fit, current: Fit, code: str, cv, alpha: float,
+                      trim: int, stick_slip: str = "auto") -> tuple[Fit, object, dict]:
+    """The windows' rollout for the chosen model (structure ``current``, estimator ``code``
+    from the IDIM fit ``idim``): RK4 with each dry friction's sign held over the step ("rk4",
+    what every earlier decision used) or with the dry friction's stick-slip ("rk4-stickslip",
+    :mod:`cdam_core.models.greybox.stickslip`: stops at zero speed, holds while the rest of
+    the force is inside its level). ``stick_slip`` "auto": the chosen model is fitted on each
+    fold's training rows and scored on its held-out windows with either rollout (the
+    estimator refitted under the rollout it is scored by: output error and simulation error
+    fit their windows and runs, IDIM-IV its auxiliary model), one-sided Wilcoxon at ``alpha``
+    (one alternative tried); stick-slip only when it predicts the held-out windows better.
+    "on" / "off": given, not tested. Stick-slip chosen, the estimator is rerun on the whole
+    record under it. Returns (fit, the BlockedCV of the chosen rollout, the report)."""
+    if stick_slip not in STICK_SLIP_CHOICES:
+        raise ValueError(f"stick_slip: expected one of {', '.join(STICK_SLIP_CHOICES)}, got "
+                         f"{stick_slip!r}")
+    where = _sticky_positions(current, cv)
+    out = {"sticky_positions": where,
+           "compared": "the chosen model's held-out windows with the dry friction's sign "
+                       "held over each RK4 step (held) against its stick-slip (stick-slip), "
+                       "the estimator refitted under each"}
+    if not where:
+        return current, cv, {**out, "chosen": "held",
+                             "rule": "no dry friction in the model: nothing sticks"}
+    if stick_slip == "off":
+        return current, cv, {**out, "chosen": "held", "rule": "given (off)"}
+    cs = cv.with_integrator("rk4-stickslip")
+    if stick_slip == "auto":
+        e0, r0 = cv.scores(current.effects, model, code)
+        e1, r1 = cs.scores(current.effects, model, code)
+        v = paired(e0, e1, 1, alpha, r0, r1)
+        out.update(rule="held unless stick-slip predicts the held-out windows better "
+                        "(one-sided Wilcoxon on paired window errors, one alternative tried)",
+                   validation=v.to_json())
+        if not v.better:
+            return current, cv, {**out, "chosen": "held"}
+    else:
+        out["rule"] = "given (on)"
+    if code != "idim":
+        f, info = _estimate(code, idim, sig, cs, trim)
+        if f is idim:   # held out it worked; on the whole record it did not
+            return current, cv, {**out, "chosen": "held", "refit": info}
+        out["refit"] = info
+        current = f
+    return current, cs, {**out, "chosen": "stick-slip"}
+
+
 def _estimate(best: str, current: Fit, sig, cv, trim: int) -> tuple[Fit, dict]:
     """IDIM-IV (``best`` "iv"), the output-error refinement ("oe") or the simulation-error
     refinement ("sim") from the IDIM fit ``current`` on the whole record; (fit, report), or
@@ -368,7 +429,7 @@ def select(model, sig: dict, candidates, alpha: float = 0.01, max_steps: int | N
            trim: int | None = None, free_run: bool = True, validation: dict | None = None,
            substeps: int | None = None, lags: int = 25, min_prominence: float = 1.0,
            spectrum_seconds: float = 0.25, declared_effects=(), held_out: bool = True, keep_terms=(),
-           estimator: str = "auto") -> Selection:
+           estimator: str = "auto", stick_slip: str = "auto") -> Selection:
     """Run the stepwise selection on the prepared signals ``sig``.
 
     ``validation``: prepared signals of another record on which the free-run errors are
@@ -396,14 +457,20 @@ def select(model, sig: dict, candidates, alpha: float = 0.01, max_steps: int | N
     (default) tries IDIM-IV and the output-error refinement of the final model
     (:mod:`.instrumental`, :mod:`.output_error`) and keeps one only if it predicts held-out
     windows better than IDIM-LS; "idim-ls" keeps IDIM-LS without trying them (cheaper);
-    "idim-iv", "oe" or "sim" (simulation error over whole runs) forces one. Returns a
-    :class:`Selection`.
+    "idim-iv", "oe" or "sim" (simulation error over whole runs) forces one. ``stick_slip``:
+    the rollout of the chosen model's RK4 windows, "auto" (default: the dry friction's
+    stick-slip only where it predicts held-out windows better than its sign held over each
+    step, :func:`choose_stick_slip`), "on" or "off" (given); ``settings["stick_slip"]`` says
+    what was compared, the p-value and what was chosen. Returns a :class:`Selection`.
     """
     if not 0 < alpha < 1:
         raise ValueError(f"alpha: must be in (0, 1), got {alpha}")
     if estimator not in ESTIMATOR_CHOICES:
         raise ValueError(f"estimator: expected one of {', '.join(ESTIMATOR_CHOICES)}, "
                          f"got {estimator!r}")
+    if stick_slip not in STICK_SLIP_CHOICES:
+        raise ValueError(f"stick_slip: expected one of {', '.join(STICK_SLIP_CHOICES)}, got "
+                         f"{stick_slip!r}")
     if max_steps is None:
         max_steps = getattr(model, "max_steps", 5)
     if int(max_steps) < 0:
@@ -506,24 +573,38 @@ def select(model, sig: dict, candidates, alpha: float = 0.01, max_steps: int | N
         current = fit(model, sig, current.effects, trim, bounded=True)
         final_error = _errors(current, sig_fr, free_run, substeps, store, "final")
     chosen = {"chosen": "IDIM-LS"}
+    simulated = cv is not None and cv.criterion == "simulation"
+    idim_final, code = current, "idim"
     if estimator == "idim-ls":
         chosen["rule"] = "given (idim-ls): IDIM-IV and output error not tried"
-    elif cv is not None and cv.criterion == "simulation":
+    elif simulated:
         # the axis models' RK4 windows for every structure: a plain sign (dry friction) is
         # held over each step's stages (GreyBox._rollout), so RK4 no longer cancels it
         current, chosen = _choose_estimator(model, sig, current, cv, alpha, trim, estimator)
-        chosen["windows_integrator"] = cv.describe()["integrator"]
-        path = [("declared model", declared.effects, model0)] + [
-            (f"after {st.candidate.effect.key}", st.candidate.fit.effects, model0)
-            for st in steps]
         code = {v: k for k, v in ESTIMATORS.items()}.get(chosen["chosen"], "idim")
-        chosen["free_run_check"] = free_run_check(cv, path, (current.effects, model, code),
-                                                  alpha)
-        if chosen["chosen"] != "IDIM-LS":
-            final_error = _errors(current, sig_fr, free_run, substeps, store, "final")
     else:
         chosen["alternatives"] = ("not tried: IDIM-IV and output error need held-out "
                                   "simulation windows")
+    if simulated and cv.integrator == "rk4":
+        # the last structural choice, for the model chosen: the dry friction's stick-slip
+        current, cv_used, stick = choose_stick_slip(model, sig, idim_final, current, code, cv,
+                                                    alpha, trim, stick_slip)
+    else:
+        cv_used = cv
+        stick = {"chosen": "held", "rule": "not decided: " + (
+            "no held-out simulation windows" if not simulated
+            else "the windows are the model kind's semi-implicit Euler")}
+        if stick_slip == "on":
+            stick["warning"] = "stick-slip given (on) but not applicable here"
+    if simulated and estimator != "idim-ls":
+        chosen["windows_integrator"] = cv.describe()["integrator"]   # the estimators' test
+        path = [("declared model", declared.effects, model0)] + [
+            (f"after {st.candidate.effect.key}", st.candidate.fit.effects, model0)
+            for st in steps]
+        chosen["free_run_check"] = free_run_check(cv_used, path,
+                                                  (current.effects, model, code), alpha)
+    if current is not idim_final:
+        final_error = _errors(current, sig_fr, free_run, substeps, store, "final")
     white = all(dg.whiteness(r, lags)["white"] for r in current.residuals.values())
     unexplained, at_model = _unexplained_structure(model, sig, current, fs, alpha,
                                                    min_prominence, spectrum_seconds, lags,
@@ -536,7 +617,7 @@ def select(model, sig: dict, candidates, alpha: float = 0.01, max_steps: int | N
     settings = {"declared_effects": sorted(dkeys), "removed_in_backward_pass": removed,
                 "stability": stability,
                 "validation": cv_info, "declared_terms_dropped": dropped_terms,
-                "estimator": chosen,
+                "estimator": chosen, "stick_slip": stick,
                 "residual_structure_explained_by_the_model": at_model,
                 "alpha": alpha, "trim": trim, "lags": lags, "min_prominence_decades": min_prominence,
                 "candidates": [c.key for c in candidates]}
@@ -556,7 +637,8 @@ def refit(sel: Selection, effects) -> Fit:
     loop's prepared record as the loop estimated the final model: its trim, its IDIM-WLS
     weights and two stages (held by the prepared signals), the physical bounds where the
     unconstrained fit breaks them, then the estimator the loop chose (IDIM-IV or the
-    output-error refinement run on the whole record as :func:`select` ran it). For a model
+    output-error refinement run on the whole record as :func:`select` ran it, with the
+    windows' rollout it chose, :func:`choose_stick_slip`). For a model
     whose effects must change form but not meaning (``cdam residual --firmware``: the causal
     arm_coupling columns a board can compute). Raises ValueError when ``sel`` holds no
     prepared record or the chosen estimator cannot be run on the new structure."""
@@ -571,7 +653,9 @@ def refit(sel: Selection, effects) -> Fit:
     best = next((k for k, v in ESTIMATORS.items() if v == chosen), None)
     if best is None:
         return f
-    cv = BlockedCV(model, sig, trim, criterion="simulation")
+    stuck = (sel.settings.get("stick_slip") or {}).get("chosen") == "stick-slip"
+    cv = BlockedCV(model, sig, trim, criterion="simulation",
+                   **({"integrator": "rk4-stickslip"} if stuck else {}))
     f2, info = _estimate(best, f, sig, cv, trim)
     if f2 is f:
         raise ValueError(f"estimator: {chosen} could not be run on the new structure "

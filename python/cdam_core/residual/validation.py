@@ -31,11 +31,13 @@ information criterion: a structure is kept only when it predicts held-out data b
 """
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 
 import numpy as np
 from scipy import stats
 
+from cdam_core.models.greybox.augmented import INTEGRATORS
 from cdam_core.models.greybox.estimation import design, fit
 from cdam_core.residual.benchmark import greybox_of
 from cdam_core.residual.instrumental import iv_fit
@@ -64,8 +66,20 @@ MIN_WINDOWS = 10   # fewer paired windows cannot reach a one-sided 1 % level (2^
 # where the motion sticks, and session 7 fell back to Euler windows for such models (generator
 # condition C, link PD at 250 Hz with dry friction, output error on Euler windows: Im +4.84 %,
 # Dl -2.37 %; on RK4 windows with the held sign and output error on every window sample:
-# Im +0.40 %, Dl 0.00 %, Kd -0.8 %, Fc -0.6 %).
+# Im +0.40 %, Dl 0.00 %, Kd -0.8 %, Fc -0.6 %). The chosen model's windows take the dry
+# friction's stick-slip instead ("rk4-stickslip") where that predicts held-out windows better
+# (selection.choose_stick_slip; condition C: p 9e-11, Im -0.01 %, Kd -0.34 %, Fc -0.2 %).
 WINDOW_INTEGRATOR = "rk4"
+
+# the windows' initial-state fit: singular values below this share of the largest are not
+# resolved by the forward-difference sensitivities (sqrt of the machine epsilon; _shooting);
+# None: numpy.linalg.lstsq's default cut (eps times the larger dimension). Measured (session
+# 10) against that cut: with the sign held the same estimates and held-out errors to the last
+# digit (the README's joint, seeds 0-3; the generator's noise-free axis with Fc 1 by output
+# error from 20 % off, held-out 5.6e-7 both); with stick-slip on that axis output error did
+# not move from its start under numpy's cut (Fv -8.6 %, Fc +20 %, held-out 6.8e-6) and
+# reaches the truth under this one (Fv +0.14 %, Fc -0.62 %, held-out 7.0e-8)
+STATE_FIT_RCOND = float(np.sqrt(np.finfo(float).eps))
 
 
 def midpoint(u) -> np.ndarray:
@@ -150,8 +164,9 @@ class BlockedCV:
                  integrator: str = WINDOW_INTEGRATOR, criterion: str | None = None):
         if criterion not in (None, "simulation", "equation"):
             raise ValueError(f"criterion: expected 'simulation' or 'equation', got {criterion!r}")
-        if integrator not in ("euler", "rk4"):
-            raise ValueError(f"integrator: expected 'euler' or 'rk4', got {integrator!r}")
+        if integrator not in INTEGRATORS:
+            raise ValueError(f"integrator: expected one of {', '.join(INTEGRATORS)}, got "
+                             f"{integrator!r}")
         self.integrator = integrator
         self.model, self.sig, self.trim = model, sig, int(trim)
         n = np.asarray(sig["t"]).size
@@ -197,6 +212,18 @@ class BlockedCV:
             if not self.declared_window_score < 1.0:
                 self.criterion = "equation"
 
+    def with_integrator(self, integrator: str) -> "BlockedCV":
+        """The same windows, blocks, normalisation and criterion, simulated by another of the
+        rollout's ``integrator`` values (the held rollout "rk4" against "rk4-stickslip":
+        :func:`cdam_core.residual.selection.choose_stick_slip`); its own caches."""
+        if integrator not in INTEGRATORS:
+            raise ValueError(f"integrator: expected one of {', '.join(INTEGRATORS)}, got "
+                             f"{integrator!r}")
+        out = copy.copy(self)
+        out.integrator = integrator
+        out._cache, out._folds = {}, {}
+        return out
+
     def inputs(self, effects) -> np.ndarray:
         """The record's input columns for a structure (the model's inputs, then the measured
         columns its effects read), as ``GreyBox`` takes them. Under the "sampled" timing (a
@@ -205,7 +232,7 @@ class BlockedCV:
         delays the input by half a sample (see :func:`midpoint`)."""
         m, s = self.model, self.sig
         cols = [np.asarray(s[c], dtype=float) for c in m.inputs]
-        if s.get("timing") == "sampled" and self.integrator == "rk4":
+        if s.get("timing") == "sampled" and self.integrator != "euler":
             cols = [midpoint(c) for c in cols]
         cols += [np.asarray(s["extra"][e.column], dtype=float) for e in effects
                  if getattr(e, "column", "")]
@@ -404,9 +431,14 @@ class BlockedCV:
             S = (P[:, j, 1:] - P[:, j, :1]) * scale / steps[None, :, None, None]  # (H, 2m, W, m)
             A = np.transpose(S, (2, 0, 3, 1)).reshape(W, H * m, 2 * m)
             b = np.transpose(r, (1, 0, 2)).reshape(W, H * m, 1)
-            # least squares per window, batched (numpy.linalg.lstsq's default singular-value
-            # cut)
-            res = b - A @ (np.linalg.pinv(A, rcond=np.finfo(float).eps * max(A.shape[1:])) @ b)
+            # least squares per window, batched; the singular-value cut is the forward
+            # differences' resolution (sqrt(eps) of the largest: a difference quotient is at
+            # best that accurate), not numpy.linalg.lstsq's eps: a state direction the window
+            # does not respond to (a motor held by dry friction) is otherwise fitted on
+            # round-off, and the window error jumps as a parameter moves by 1e-8
+            rcond = STATE_FIT_RCOND if STATE_FIT_RCOND is not None else \
+                np.finfo(float).eps * max(A.shape[1:])
+            res = b - A @ (np.linalg.pinv(A, rcond=rcond) @ b)
             out[j] = res[..., 0] if samples else np.sum(res[..., 0] ** 2, axis=1) / (H * m)
         return out if thetas is not None else out[0]
 
@@ -439,7 +471,9 @@ class BlockedCV:
                 "folds": self.folds, "horizon_samples": self.horizon,
                 "horizon_s": self.horizon * self.dt, "guard_samples": self.guard,
                 "integrator": {"euler": "semi-implicit Euler (the model's own)",
-                               "rk4": "Runge-Kutta 4, inputs held over the sample"}[
+                               "rk4": "Runge-Kutta 4, inputs held over the sample",
+                               "rk4-stickslip": "Runge-Kutta 4, inputs held over the sample, "
+                                                "dry friction sticking and slipping"}[
                                    self.integrator],
                 "test": "one-sided Wilcoxon signed-rank on paired window errors, "
                         "Bonferroni over the structures tried"}

@@ -27,6 +27,7 @@ import dataclasses
 import numpy as np
 
 from cdam_core.base.checks import as_2d
+from cdam_core.models.greybox import stickslip as ss
 from cdam_core.models.greybox import trace as tr
 from cdam_core.models.greybox.declared import DerivativeFilter, SignalFilters
 from cdam_core.models.greybox.effects import LIBRARY, Effect
@@ -37,6 +38,9 @@ from cdam_core.models.protocol import Model
 __all__ = ["GreyBox"]
 
 MAX_SUBSTEPS = 10000
+# the rollout's integrators (GreyBox._rollout): the model kind's semi-implicit Euler, RK4 with
+# a dry friction's sign held over each step, RK4 with the dry friction's stick-slip
+INTEGRATORS = ("euler", "rk4", "rk4-stickslip")
 
 
 def _effect_to_dict(e: Effect) -> dict:
@@ -337,15 +341,23 @@ class GreyBox(Model):
         its switching terms (a dry friction's sign, a direction test: :data:`.trace.SWITCHING`)
         are evaluated once per step at the step's start state and held over its four stages,
         as a firmware step holds them (evaluated at each stage, where the motion sticks the
-        stages see -Fc, +Fc, -Fc, +Fc and RK4's weights 1, 2, 2, 1 cancel the friction).
+        stages see -Fc, +Fc, -Fc, +Fc and RK4's weights 1, 2, 2, 1 cancel the friction); a
+        velocity coordinate whose switching terms jump at its zero (a dry friction) stops at
+        zero, holds there while the friction can hold it and breaks away in the direction of
+        the net force otherwise in "rk4-stickslip" (stick-slip, :mod:`.stickslip`: a held
+        sign alone carries the motion through zero and chatters where the motor sticks). Which
+        of "rk4" and "rk4-stickslip" a record's windows use is decided on held-out data
+        (:mod:`cdam_core.residual.selection`); "euler" (saved models, firmware) has no
+        stick-slip.
         ``thetas``: (G, parameters) values in the order of ``theta_``, the W lanes split into G
         consecutive groups, each simulated with its own parameters (batched perturbations).
 
         The equations run compiled (``_core.greybox_rollout`` on the tape that
         :mod:`.trace` records from them) when the extension has it and the tape agrees with
         the numpy equations on the first states; otherwise in numpy, one step at a time."""
-        if integrator not in ("euler", "rk4"):
-            raise ValueError(f"integrator: expected 'euler' or 'rk4', got {integrator!r}")
+        if integrator not in INTEGRATORS:
+            raise ValueError(f"integrator: expected one of {', '.join(INTEGRATORS)}, got "
+                             f"{integrator!r}")
         u_all, ex_all = self._inputs(U)
         pre_all = self._precomputed(U, Y) if pre is None else pre
         dt = float(self.dt)
@@ -359,10 +371,12 @@ class GreyBox(Model):
             if th.shape[1] != len(names) or x.shape[0] % th.shape[0]:
                 raise ValueError("thetas: expected (groups, parameters), lanes a multiple of groups")
         inv = self._inverses(th, names)
+        sticky = self._sticky(u_all, ex_all, pre_all) if integrator == "rk4-stickslip" \
+            else None
         fast = self._compiled(u_all, ex_all, pre_all)
         if fast is not None:
             out = self._rollout_compiled(fast, u_all, ex_all, pre_all, starts, steps, path, x, v,
-                                         th, inv, t_start, integrator)
+                                         th, inv, t_start, integrator, sticky)
             if out is not None:
                 return out
         per = x.shape[0] // th.shape[0]
@@ -395,20 +409,66 @@ class GreyBox(Model):
                     v = v + h * acc(x, v, u, ex, k, t)
                     x = x + h * v
                     continue
-                a1 = acc(x, v, u, ex, k, t, 0)
+                zero = sticky[None, :] & (v == 0.0) if sticky is not None else v != v
+                stuck = None
+                if zero.any():      # coordinates at rest: stick or break away (stickslip)
+                    def at(vv, x=x, u=u, ex=ex, k=k, t=t):
+                        a_ = acc(x, vv, u, ex, k, t, 0)
+                        return a_, switches.values
+                    a1, held_values, stuck, side, limits = ss.start(at, v, zero)
+                    switches.values = held_values
+                else:
+                    a1 = acc(x, v, u, ex, k, t, 0)
+                    side = np.sign(v)
+                x0_, v0_ = x, v
                 x2, v2 = x + 0.5 * h * v, v + 0.5 * h * a1
                 a2 = acc(x2, v2, u, ex, k, t, 1)
+                if stuck is not None:
+                    a2 = np.where(stuck, 0.0, a2)
                 x3, v3 = x + 0.5 * h * v2, v + 0.5 * h * a2
                 a3 = acc(x3, v3, u, ex, k, t, 2)
+                if stuck is not None:
+                    a3 = np.where(stuck, 0.0, a3)
                 x4, v4 = x + h * v3, v + h * a3
                 a4 = acc(x4, v4, u, ex, k, t, 3)
+                if stuck is not None:
+                    a4 = np.where(stuck, 0.0, a4)
                 x = x + h / 6.0 * (v + 2.0 * v2 + 2.0 * v3 + v4)
                 v = v + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
+                if sticky is not None and sticky.any():
+                    x, v, cross, left = ss.stop(x0_, v0_, x, v, side, sticky, h)
+                    held_over = stuck if stuck is not None else np.zeros_like(cross)
+                    if cross.any() or held_over.any():
+                        def at_end(vv, x=x, u=u, ex=ex, k=k, t=t):
+                            return acc(x, vv, u, ex, k, t, 0), switches.values
+                        x, v = ss.finish(at_end, x, v, cross, left, held_over,
+                                         limits if stuck is not None else None, h)
             if not np.all(np.isfinite(x)) or np.max(np.abs(x), initial=0.0) > 1e9:
                 raise ValueError(f"prediction diverged at row {int(k[0]) + 1} of the segment")
             if path:
                 out[j] = x
         return out if path else x
+
+    def _sticky(self, u_all, ex_all, pre_all) -> np.ndarray:
+        """(positions,) bool: the velocity coordinates a dry friction can stop (a switching
+        term that jumps at their zero; :func:`.stickslip.sticky_coordinates`), from the numpy
+        equations at the zero state, zero inputs and the series' first row; kept per model."""
+        if "_sticky_" not in self.__dict__:
+            m = self._m
+            n = len(m.positions)
+            sw = tr.Switches()
+            k = np.zeros(2, dtype=int)
+
+            def values(v):
+                sw.record()
+                x = np.zeros((2, n))
+                u = {name: np.zeros(2) for name in u_all}
+                ex = {c: np.zeros(2) for c in ex_all}
+                self._errors(self._state(tr.held(x, sw), tr.held(v, sw), np.zeros((2, n)), u,
+                                         ex, k, np.zeros(2)), pre_all)
+                return sw.values
+            self.__dict__["_sticky_"] = ss.sticky_coordinates(values, n)
+        return self.__dict__["_sticky_"]
 
     def _inverses(self, th: np.ndarray, names: list) -> np.ndarray:
         """The inertia inverse of each parameter group (G, m, m)."""
@@ -439,7 +499,7 @@ class GreyBox(Model):
         except ImportError:
             return None
         if not hasattr(_core, "greybox_rollout") or getattr(_core, "GREYBOX_TAPE_OPS", 0) != \
-                len(tr.OPS):
+                len(tr.OPS) or not getattr(_core, "GREYBOX_STICK_SLIP", 0):
             return None
         layout = self._series_layout(u_all, ex_all, pre_all)
         cache = self.__dict__.setdefault("_tapes", {})
@@ -479,7 +539,7 @@ class GreyBox(Model):
         return tape, np.array(outs, dtype=np.int32)
 
     def _rollout_compiled(self, fast, u_all, ex_all, pre_all, starts, steps, path, x, v, th,
-                          inv, t_start, integrator):
+                          inv, t_start, integrator, sticky=None):
         (op, a, b, c), outs, run, state = fast
         cols = list(u_all.values()) + list(ex_all.values()) + \
             [col for cols in pre_all.values() for col in cols.values()]
@@ -513,8 +573,10 @@ class GreyBox(Model):
         if not state["ok"]:
             return None
         P, diverged = run(op, a, b, c, outs, series, th, inv, x, v, st, int(steps),
-                          int(self.substeps_), integrator == "rk4", float(self.dt),
-                          float(t_start), bool(path))
+                          int(self.substeps_), integrator != "euler", float(self.dt),
+                          float(t_start), bool(path),
+                          np.zeros(0, dtype=np.int32) if sticky is None
+                          else sticky.astype(np.int32))
         if diverged >= 0:
             raise ValueError(f"prediction diverged at row {int(diverged)} of the segment")
         return P
@@ -551,9 +613,11 @@ class GreyBox(Model):
         (steps, len(starts), outputs) of rows ``start + 1 .. start + steps``.
 
         ``integrator``: "euler" (default: the model kind's semi-implicit Euler, what a saved
-        model and the firmware run; its timing error is half a substep) or "rk4" (Runge-Kutta
+        model and the firmware run; its timing error is half a substep), "rk4" (Runge-Kutta
         4 with the inputs held over the sample: a window's integration error far below the
-        half-sample effects its scores may decide on, see :meth:`_choose_substeps`).
+        half-sample effects its scores may decide on, see :meth:`_choose_substeps`; a dry
+        friction's sign held over each step) or "rk4-stickslip" (the same, a dry friction
+        sticking and slipping: :meth:`_rollout`).
         ``thetas``: (G, parameters) in the order of :meth:`parameters`; the windows are split
         into G consecutive groups, each simulated with its own parameter values (a batched
         finite-difference Jacobian).
