@@ -56,11 +56,12 @@ from cdam_core.record.realdata.nanodrone import nanodrone_files  # noqa: E402
 
 AT = (1, 5, 10, 20, 50)
 SHOWN = ("naive", "arx", "anchor", "network", "quad_hybrid", "anchored_flights",
-         "anchored_types_pooled", "anchored")
+         "anchored_types_pooled", "anchored_ungated", "anchored")
 #: the weightings measured beside the model (reported, never chosen on the test type):
 #: session 8's design (weights on the validation flights, rule "worst") and the type-out
 #: design under the other rule
-VARIANTS = {"anchored_flights": "flights", "anchored_types_pooled": "types_pooled"}
+VARIANTS = {"anchored_flights": "flights", "anchored_types_pooled": "types_pooled",
+            "anchored_ungated": "types_worst"}
 PAPERNETS = Path(__file__).resolve().parents[1] / "papernets" / "results.json"
 
 
@@ -118,7 +119,9 @@ def wins(scores, against, model="anchored", extra=None) -> list[str]:
         parts = []
         for name, curve in others.items():
             below = np.asarray(g[model])[:, j] < curve[:, j]
-            parts.append(f"{name} {int(below.sum())}/{below.size}")
+            equal = int(np.sum(np.asarray(g[model])[:, j] == curve[:, j]))
+            parts.append(f"{name} {int(below.sum())}/{below.size}"
+                         + (f" (equal at {equal})" if equal else ""))
         lines.append(f"- {group}: below " + ", ".join(parts))
     return lines
 
@@ -222,7 +225,9 @@ def _write(out, folds, choices, md, fixed) -> int:
             "the raw-input ARX's; rule and design fixed before the test folds were run); "
             "anchored_flights: session 8's weights (chosen on the validation flights with "
             "the fit flights' components, rule worst); anchored_types_pooled: the type-out "
-            "sums under the pooled least-squares rule; network: the "
+            "sums under the pooled least-squares rule; anchored_ungated: the type-out weights "
+            "without session 10's gate (each step and group the raw ARX's alone unless "
+            "every held-out type prefers the blend there), the session-9 model; network: the "
             "arx_kstep model alone; the paper networks' "
             "curves are the committed "
             "docs/examples/papernets/results.json (same folds and test flights).", "",
