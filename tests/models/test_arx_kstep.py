@@ -293,12 +293,17 @@ def test_anchored_fitter_type_out_design_and_the_direct_predictor():
         assert np.all(model.weights_[closed, j, 0] == 1.0)
     assert np.array_equal(fitter.blends_["types_pooled"].weights_,
                           np.asarray(t["other_rule_weights"]["pooled"]))
-    assert set(fitter.blends_) == {"flights", "types_worst", "types_pooled"}
+    assert set(fitter.blends_) == {"flights", "types_worst", "types_pooled",
+                                   "types_worst_every", "types_worst_mean"}
+    assert gate["need"] == "mean" and np.array_equal(
+        fitter.blends_["types_worst_mean"].weights_, model.weights_)
     assert c["direct"]["orders"][2] == c["arx_orders"][2]       # the anchor's delay
     with pytest.raises(ValueError, match="direct"):
         AnchoredFitter(direct=True)
     with pytest.raises(ValueError, match="blend_design"):
         AnchoredFitter(blend_design="folds")
+    with pytest.raises(ValueError, match="gate"):
+        AnchoredFitter(gate="median")
     train.names = ["a_1"] * 6
     with pytest.raises(ValueError, match="type"):
         fitter(train, fit, valid)

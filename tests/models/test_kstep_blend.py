@@ -217,12 +217,14 @@ def test_unit_errors_and_held_out_score_against_explicit_predictions():
 
 def test_held_out_gate_against_explicit_predictions():
     """Three units, one extra component (J = 1), one output per group: the blend is kept at a
-    step and output only where, for every unit, the weight chosen on the two others (pooled:
+    step and output only where, for every unit (need "every"), or on the mean over the units
+    of the RMSE ratios (need "mean"), the weight chosen on the two others (pooled:
     the closed form clip(sum d e / sum d d, 0, 1); worst: the point of {0, 0.01, .., 1} whose
     larger ratio over the two others of its squared error to the reference's is least, the
     first such point) gives that unit a lower error than the reference; elsewhere the weights
     are the reference's alone. All computed here from the predictions themselves; the data
-    make the extra component help every unit on output 0 and hurt one unit on output 1."""
+    make the extra component help every unit on output 0 (but one at step 4) and hurt one
+    unit on output 1 (a little at step 1, where the mean keeps the blend)."""
     from cdam_core.models.kstep_blend import held_out_gate
     rng = np.random.default_rng(11)
     steps, m, rows = 4, 2, 60
@@ -231,6 +233,7 @@ def test_held_out_gate_against_explicit_predictions():
     gain = np.ones((3, steps, m))
     gain[:, :, 1] = [[0.9], [0.8], [-0.6]]              # unit 2: the component hurts output 1
     gain[:, 3, 0] = [0.05, 0.9, 0.9]                    # step 4, output 0: unit 0 barely
+    gain[2, 0, 1] = 0.3                                 # step 1, output 1: unit 2 a little
     Y = P[:, 0] + gain[:, :, None, :] * D + 0.3 * rng.normal(size=(3, steps, rows, m))
     E = Y - P[:, 0]
     G = np.einsum("uhri,uhri->uhi", D, D)[..., None, None]
@@ -255,15 +258,21 @@ def test_held_out_gate_against_explicit_predictions():
         return w
 
     for rule in ("pooled", "worst"):
-        kept = np.ones((steps, m), bool)
+        ratio = np.zeros((3, steps, m))
         for u in range(3):
             w = choose([v for v in range(3) if v != u], rule)
-            kept &= sse(u, w) < np.sum(E[u] ** 2, axis=1)
-        # kept on output 0 but at step 4 (unit 0), closed on output 1 (unit 2)
-        assert kept[:3, 0].all() and not kept[3, 0] and not kept[:, 1].any()
+            ratio[u] = np.sqrt(sse(u, w) / np.sum(E[u] ** 2, axis=1))
+        kept = {"every": np.all(ratio < 1, axis=0), "mean": np.mean(ratio, axis=0) < 1}
+        # every: kept on output 0 but at step 4 (unit 0), closed on output 1 (unit 2)
+        assert kept["every"][:3, 0].all() and not kept["every"][3, 0]
+        assert not kept["every"][:, 1].any()
+        assert kept["mean"][0, 1] and (kept["mean"] != kept["every"]).sum() == 1
         full = choose([0, 1, 2], rule)
         W = np.stack([1 - full, full], axis=2)
-        gated, got = held_out_gate(W, G, b, c, [0, 1], rule)
-        np.testing.assert_array_equal(got, kept)
-        expect = np.where(kept[..., None], W, np.array([1.0, 0.0]))
-        np.testing.assert_allclose(gated, expect, atol=1e-12)
+        for need in ("every", "mean"):
+            gated, got = held_out_gate(W, G, b, c, [0, 1], rule, need=need)
+            np.testing.assert_array_equal(got, kept[need])
+            expect = np.where(kept[need][..., None], W, np.array([1.0, 0.0]))
+            np.testing.assert_allclose(gated, expect, atol=1e-12)
+    with pytest.raises(ValueError, match="need"):
+        held_out_gate(W, G, b, c, [0, 1], "worst", need="median")

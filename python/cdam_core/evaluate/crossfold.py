@@ -35,8 +35,9 @@ from cdam_core.models.arx import FEATURES, ArxModel
 from cdam_core.models.arx_direct import ArxDirect
 from cdam_core.models.flight.physics import QuadPhysics
 from cdam_core.models.kstep_blend import RULES as BLEND_RULES
-from cdam_core.models.kstep_blend import (KStepBlend, held_out_gate, held_out_score,
-                                         rule_weights)
+from cdam_core.models.kstep_blend import GATES
+from cdam_core.models.kstep_blend import (KStepBlend, held_out_gate, held_out_ratios,
+                                         held_out_score, rule_weights)
 from cdam_core.record.realdata.nanodrone import load_nanodrone, trajectory_type
 from cdam_core.record.stack import Stack, stack_records
 
@@ -338,12 +339,14 @@ class AnchoredFitter:
       weights by the rule on the other held-out types, the RMSE relative to the raw ARX on
       this one, mean over types, steps and groups) is lower with it than without; else it is
       left out. Measured on the 17 flights (docs/examples/nanodrone/anchored/): 0.907-0.936
-      with it against 0.966-0.993 without, kept in all four folds. With ``gate`` (default,
-      session 10) the weights of a step and group are the raw ARX's alone unless every
-      held-out type prefers the blend there: the weights the rule chooses on the other
-      held-out types have a lower error on it than the raw ARX's
-      (``models.kstep_blend.held_out_gate``); the ungated weights are measured beside
-      (``blends_["types_<rule>"]``);
+      with it against 0.966-0.993 without, kept in all four folds. The gate (session 10,
+      ``models.kstep_blend.held_out_gate``): the weights of a step and group are the raw
+      ARX's alone unless the held-out types prefer the blend there (the weights the rule
+      chooses on the other held-out types have a lower error than the raw ARX's; ``gate``:
+      ``"mean"`` (default): on the mean of the types' RMSE ratios, the criterion of the
+      direct predictor's decision applied per step and group; ``"every"``: on every type;
+      ``"none"``: no gate, session 9's model); the ungated and both gated weightings are
+      measured beside (``blends_["types_<rule>"]``, ``blends_["types_<rule>_<gate>"]``);
     - ``"auto"`` (the CLI's default since session 10): ``"types"`` when the training flights
       hold two or more trajectory types, else ``"flights"`` (the type-out design needs two;
       on the four-way protocol, each fold three training types, the type-out design was below
@@ -357,7 +360,7 @@ class AnchoredFitter:
     def __init__(self, grid=None, fixed=None, select_horizons=(1, 10, 25, 50),
                  arx_grid=ARX_GRID, groups=NANODRONE_GROUPS, blind=ANCHORED_BLIND,
                  anchor_features=("raw", "physics"), blend="validation", cache=None,
-                 blend_rule="worst", blend_design="flights", direct=False, gate=True):
+                 blend_rule="worst", blend_design="flights", direct=False, gate="mean"):
         self.grid = dict(ANCHORED_GRID if grid is None else grid)
         self.fixed = dict(ANCHORED_FIXED if fixed is None else fixed)
         if not self.grid:
@@ -384,7 +387,9 @@ class AnchoredFitter:
                              "blend_design='types' or 'auto'")
         self.blend_design = blend_design
         self.direct = bool(direct)
-        self.gate = bool(gate)
+        if gate not in ("none", *GATES):
+            raise ValueError(f"gate: unknown {gate!r}; use none, {', '.join(GATES)}")
+        self.gate = gate
         self.choices = []
 
     def _trained(self, params, stack, valid=None):
@@ -526,6 +531,9 @@ class AnchoredFitter:
             for r, wr in (types or {}).get("rule_weights", {}).items():
                 self.blends_[f"types_{r}"] = KStepBlend(final + [net], weights=np.asarray(wr),
                                                         groups=labels)
+            for need, g in (types or {}).get("gates", {}).items():
+                self.blends_[f"types_{self.blend_rule}_{need}"] = KStepBlend(
+                    final + [net], weights=np.asarray(g["weights"]), groups=labels)
         names = [f"{f} arx {','.join(map(str, o))}" for f, o in arxs]
         if keep_direct:
             names.append(f"{feat} direct {','.join(map(str, direct['orders']))}")
@@ -544,7 +552,9 @@ class AnchoredFitter:
                              "direct": direct,
                              "type_out": None if types is None else
                              {**{k: v for k, v in types.items()
-                                 if k not in ("weights", "rule_weights")},
+                                 if k not in ("weights", "rule_weights", "gates")},
+                              "gates_closed": {n: g["closed"] for n, g in
+                                               types.get("gates", {}).items()},
                               "other_rule_weights": {r: v for r, v in
                                                      types["rule_weights"].items()
                                                      if r != self.blend_rule}},
@@ -608,13 +618,19 @@ class AnchoredFitter:
             if not keep:
                 G, b = G[..., idx, :][..., idx], b[..., idx]
         W = {r: rule_weights(G, b, c, labels, r) for r in BLEND_RULES}
-        weights, kept = W[self.blend_rule], None
-        if self.gate:
-            weights, kept = held_out_gate(weights, G, b, c, labels, self.blend_rule)
+        weights, gates = W[self.blend_rule], {}
+        ratios = held_out_ratios(G, b, c, labels, self.blend_rule)
+        for need in GATES:                 # every gate (the chosen one and those beside it)
+            gw, kept = held_out_gate(weights, G, b, c, labels, self.blend_rule, need=need,
+                                     ratios=ratios)
+            gates[need] = {"weights": gw.tolist(), "kept": kept.astype(int).tolist(),
+                           "closed": [[int(k) + 1 for k in np.flatnonzero(~kept[:, j])]
+                                      for j in range(kept.shape[1])]}
+        if self.gate != "none":
+            weights = np.asarray(gates[self.gate]["weights"])
         return {"weights": weights, "types": present, "keep_direct": bool(keep),
                 "scores": scores, "rule_weights": {r: v.tolist() for r, v in W.items()},
-                "gate": None if kept is None else
-                {"groups": [int(g) for g in np.unique(labels)],
-                 "kept": kept.astype(int).tolist(),
-                 "closed": [[int(k) + 1 for k in np.flatnonzero(~kept[:, j])]
-                            for j in range(kept.shape[1])]}}
+                "gate": None if self.gate == "none" else
+                {"need": self.gate, "groups": [int(g) for g in np.unique(labels)],
+                 **{k: v for k, v in gates[self.gate].items() if k != "weights"}},
+                "gates": gates}

@@ -37,7 +37,7 @@ from cdam_core.models.schema import field_array
 
 __all__ = ["KStepBlend", "simplex_weights", "minimax_weights", "blend_sums", "simplex_grid",
            "rule_weights", "unit_errors", "held_out_score", "held_out_ratios",
-           "held_out_gate", "RULES"]
+           "held_out_gate", "GATES", "RULES"]
 
 
 def _qp_simplex(G, b):
@@ -180,15 +180,26 @@ def held_out_score(G, b, c, labels, rule: str, resolution: int = 100) -> float:
     return float(np.mean(held_out_ratios(G, b, c, labels, rule, resolution)))
 
 
-def held_out_gate(W, G, b, c, labels, rule: str, resolution: int = 100):
+GATES = ("every", "mean")
+
+
+def held_out_gate(W, G, b, c, labels, rule: str, resolution: int = 100, need: str = "every",
+                  ratios=None):
     """The weights W (steps, m, J + 1) with each step's and group's weights replaced by the
-    reference alone (component 0) where the held-out units do not all prefer the blend: the
-    blend is kept at step k in group g only when, for every unit, the weights ``rule`` chooses
-    on the other units have a lower error there than the reference (``held_out_ratios`` < 1
-    for every unit). Returns (gated weights, kept (steps, groups) bool)."""
+    reference alone (component 0) where the held-out units do not prefer the blend: the blend
+    is kept at step k in group g only when the weights ``rule`` chooses on the other units
+    have a lower error there than the reference on every unit (``need="every"``:
+    ``held_out_ratios`` < 1 for every unit) or on the mean over the units (``need="mean"``:
+    their mean < 1, the criterion ``held_out_score`` applies to the whole curve). ``ratios``:
+    ``held_out_ratios``' result when already computed. Returns (gated weights, kept
+    (steps, groups) bool)."""
+    if need not in GATES:
+        raise ValueError(f"need: unknown {need!r}; use {' or '.join(GATES)}")
     W = np.array(W, dtype=float, copy=True)
     lab = np.asarray(labels)
-    kept = np.all(held_out_ratios(G, b, c, labels, rule, resolution) < 1.0, axis=0)
+    r = held_out_ratios(G, b, c, labels, rule, resolution) if ratios is None else \
+        np.asarray(ratios, float)
+    kept = np.all(r < 1.0, axis=0) if need == "every" else np.mean(r, axis=0) < 1.0
     for j, g in enumerate(np.unique(lab)):
         for k in np.flatnonzero(~kept[:, j]):
             W[k, lab == g] = 0.0
