@@ -87,7 +87,7 @@ def test_identify_save_evaluate_round_trip(records, tmp_path, capsys, monkeypatc
         assert any(" direct " in n for n in idj["choice"]["blend_components"]) == \
             t["keep_direct"]
         closed = sum(len(v) for v in t["gate"]["closed"])
-        assert f"the ARX's weights alone (not every held-out type preferred the blend) at " \
+        assert f"the ARX's weights alone (the held-out types did not prefer the blend) at " \
             f"{closed} of 100 steps x groups" in out        # 50 steps, two outputs
     else:
         assert idj["choice"]["blend_design"] == "flights" and "type_out" not in idj["choice"]

@@ -74,8 +74,9 @@ def register(subparsers) -> None:
                         "trajectory type of TRAIN, the file name's prefix up to the first "
                         "'_', held out in turn from the components' training, the direct "
                         "multi-step predictor kept where it lowers the type-out score, each "
-                        "step's and group's weights the ARX's alone unless every held-out "
-                        "type prefers the blend there; evaluate.crossfold.AnchoredFitter, the "
+                        "step's and group's weights the ARX's alone unless the held-out types "
+                        "prefer the blend there on the mean; evaluate.crossfold.AnchoredFitter, "
+                        "the "
                         "design of docs/examples/nanodrone/anchored/; needs two types in "
                         "TRAIN); auto: types when TRAIN holds two or more types, else flights "
                         "(default: auto)")
@@ -405,7 +406,7 @@ def _anchored(args, train, read) -> int:
         gate = (c.get("type_out") or {}).get("gate")
         if gate:
             closed = sum(len(v) for v in gate["closed"])
-            print(f"  the ARX's weights alone (not every held-out type preferred the blend) "
+            print(f"  the ARX's weights alone (the held-out types did not prefer the blend) "
                   f"at {closed} of {sum(len(v) for v in gate['kept'])} steps x groups")
     print(f"  wall time {seconds:.0f} s (selection {c['select_seconds']:.0f} s, final fit on "
           f"all TRAIN {c['fit_seconds']:.0f} s)")
