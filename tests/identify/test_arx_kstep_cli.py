@@ -49,7 +49,7 @@ def records(tmp_path_factory):
 SMALL = ["--hidden", "4", "--lags", "1", "--horizon", "10", "--epochs", "6", "--stride", "10"]
 
 
-@pytest.mark.parametrize("design", [[], ["--blend-design", "types"]])
+@pytest.mark.parametrize("design", [[], ["--blend-design", "flights"]])
 def test_identify_save_evaluate_round_trip(records, tmp_path, capsys, monkeypatch, design):
     import cdam_core.models.file as model_file
     from cdam_core.models.file import load_model
@@ -77,14 +77,20 @@ def test_identify_save_evaluate_round_trip(records, tmp_path, capsys, monkeypatc
     assert idj["fixed"]["net_features"] == "raw"                     # two inputs: no rotors
     assert idj["choice"]["validation"][idj["choice"]["chosen"]] < \
         idj["choice"]["validation"]["arx"]
-    if design:                  # type out over the two training types, the direct decision
+    # the default (auto): type out over the two training types, the direct decision
+    assert idj["choice"]["blend_design_asked"] == ("flights" if design else "auto")
+    if not design:
+        assert idj["choice"]["blend_design"] == "types"
         t = idj["choice"]["type_out"]
         assert t["types"] == ["stepa", "stepb"] and "weights chosen type out" in out
         assert t["keep_direct"] == (t["scores"]["with_direct"] < t["scores"]["without_direct"])
         assert any(" direct " in n for n in idj["choice"]["blend_components"]) == \
             t["keep_direct"]
+        closed = sum(len(v) for v in t["gate"]["closed"])
+        assert f"the ARX's weights alone (the held-out types did not prefer the blend) at " \
+            f"{closed} of 100 steps x groups" in out        # 50 steps, two outputs
     else:
-        assert "type_out" not in idj["choice"]
+        assert idj["choice"]["blend_design"] == "flights" and "type_out" not in idj["choice"]
     # the file predicts what the fitted model does (k-step and from the inputs alone)
     st = stack_records([test])
     mem, disk = fitted["model"], load_model(path)

@@ -98,3 +98,27 @@ def test_file_round_trip_and_bad_input():
         np.testing.assert_array_equal(load_model(f"{tmp}/m.json").predict(U, Y, mode="k_step",
                                                                            k=4),
                                       m.predict(U, Y, mode="k_step", k=4))
+
+
+def test_one_step_on_physics_features_is_the_least_squares_fit():
+    """horizon 1 with physics features (a fit that once failed: no window is cut by a
+    segment's end): step 1 is the least-squares fit on the features written here from their
+    definition (f_i = u_i^2, their sum and the three X-mixer torque combinations, the scaled
+    commands; a least-squares fit with an intercept does not depend on the columns' scales)."""
+    rng = np.random.default_rng(7)
+    lengths = [300, 250]
+    U = 1.0 + 0.3 * rng.uniform(size=(sum(lengths), 4))
+    f = U ** 2
+    F = np.column_stack([U, f.sum(1), f[:, 0] + f[:, 3] - f[:, 1] - f[:, 2],
+                         f[:, 0] + f[:, 1] - f[:, 2] - f[:, 3],
+                         f[:, 0] - f[:, 1] + f[:, 2] - f[:, 3]])
+    Y = np.zeros((sum(lengths), 2))
+    for t in range(1, len(Y)):
+        Y[t] = 0.7 * Y[t - 1] + [0.3 * F[t - 1, 4], 0.2 * F[t - 1, 5]]
+    Y += 0.01 * rng.normal(size=Y.shape)
+    orders = (2, 2, 1)
+    m = ArxDirect(orders, "physics", horizon=1).fit(U, Y, segments=lengths)
+    (k, rows, P), = list(m.rollout(U, Y, 1, segments=lengths))
+    origins, want = _numpy_direct(F, Y, lengths, orders, 1)
+    np.testing.assert_array_equal(rows, origins + 1)
+    np.testing.assert_allclose(P, want, rtol=0, atol=1e-8 * np.abs(want).max())

@@ -282,15 +282,36 @@ def test_anchored_fitter_type_out_design_and_the_direct_predictor():
     assert (ArxDirect in kinds) == t["keep_direct"]
     assert model.weights_.shape == (50, 2, len(model.components_))
     assert np.array_equal(model.weights_, np.asarray(c["blend_weights"]))
-    assert np.array_equal(fitter.blends_["types_worst"].weights_, model.weights_)
+    # the gate: per step and group the ungated weights, or the raw ARX's alone where closed
+    ungated, gate = fitter.blends_["types_worst"].weights_, t["gate"]
+    assert np.shape(gate["kept"]) == (50, 2)
+    for j in range(2):
+        closed = np.asarray(gate["closed"][j], int) - 1
+        assert np.array_equal(np.flatnonzero(~np.asarray(gate["kept"], bool)[:, j]), closed)
+        keep = np.setdiff1d(np.arange(50), closed)
+        assert np.array_equal(model.weights_[keep, j], ungated[keep, j])
+        assert np.all(model.weights_[closed, j, 0] == 1.0)
     assert np.array_equal(fitter.blends_["types_pooled"].weights_,
                           np.asarray(t["other_rule_weights"]["pooled"]))
-    assert set(fitter.blends_) == {"flights", "types_worst", "types_pooled"}
+    assert set(fitter.blends_) == {"flights", "types_worst", "types_pooled",
+                                   "types_worst_every", "types_worst_mean"}
+    assert gate["need"] == "mean" and np.array_equal(
+        fitter.blends_["types_worst_mean"].weights_, model.weights_)
     assert c["direct"]["orders"][2] == c["arx_orders"][2]       # the anchor's delay
     with pytest.raises(ValueError, match="direct"):
         AnchoredFitter(direct=True)
     with pytest.raises(ValueError, match="blend_design"):
         AnchoredFitter(blend_design="folds")
+    with pytest.raises(ValueError, match="gate"):
+        AnchoredFitter(gate="median")
     train.names = ["a_1"] * 6
     with pytest.raises(ValueError, match="type"):
         fitter(train, fit, valid)
+    # auto: the type-out design with two or more types, else the validation flights'
+    auto = AnchoredFitter(grid=fitter.grid, fixed=fitter.fixed, arx_grid=((1, 1, 1),),
+                          groups=(), blind=(), blend_design="auto", direct=True)
+    m = auto(train, fit, valid)
+    a = auto.choices[-1]
+    assert (a["blend_design"], a["blend_design_asked"], a["type_out"], a["direct"]) == \
+        ("flights", "auto", None, None)
+    assert ArxDirect not in [type(p) for p in getattr(m, "components_", [m])]

@@ -213,3 +213,66 @@ def test_unit_errors_and_held_out_score_against_explicit_predictions():
         held_out_score(G[:1], b[:1], c[:1], [0, 1], "pooled")
     with pytest.raises(ValueError, match="rule"):
         held_out_score(G, b, c, [0, 1], "median")
+
+
+def test_held_out_gate_against_explicit_predictions():
+    """Three units, one extra component (J = 1), one output per group: the blend is kept at a
+    step and output only where, for every unit (need "every"), or on the mean over the units
+    of the RMSE ratios (need "mean"), the weight chosen on the two others (pooled:
+    the closed form clip(sum d e / sum d d, 0, 1); worst: the point of {0, 0.01, .., 1} whose
+    larger ratio over the two others of its squared error to the reference's is least, the
+    first such point) gives that unit a lower error than the reference; elsewhere the weights
+    are the reference's alone. All computed here from the predictions themselves; the data
+    make the extra component help every unit on output 0 (but one at step 4) and hurt one
+    unit on output 1 (a little at step 1, where the mean keeps the blend)."""
+    from cdam_core.models.kstep_blend import held_out_gate
+    rng = np.random.default_rng(11)
+    steps, m, rows = 4, 2, 60
+    P = rng.normal(size=(3, 2, steps, rows, m))        # unit, component, step, row, output
+    D = P[:, 1] - P[:, 0]
+    gain = np.ones((3, steps, m))
+    gain[:, :, 1] = [[0.9], [0.8], [-0.6]]              # unit 2: the component hurts output 1
+    gain[:, 3, 0] = [0.05, 0.9, 0.9]                    # step 4, output 0: unit 0 barely
+    gain[2, 0, 1] = 0.3                                 # step 1, output 1: unit 2 a little
+    Y = P[:, 0] + gain[:, :, None, :] * D + 0.3 * rng.normal(size=(3, steps, rows, m))
+    E = Y - P[:, 0]
+    G = np.einsum("uhri,uhri->uhi", D, D)[..., None, None]
+    b = np.einsum("uhri,uhri->uhi", D, E)[..., None]
+    c = np.einsum("uhri,uhri->uhi", E, E)
+    grid = np.linspace(0.0, 1.0, 101)
+
+    def sse(u, w):                                      # (steps, m) at weight w (steps, m)
+        pred = (1 - w)[:, None, :] * P[u, 0] + w[:, None, :] * P[u, 1]
+        return np.sum((Y[u] - pred) ** 2, axis=1)
+
+    def choose(units, rule):
+        if rule == "pooled":
+            return np.clip(np.sum(D[units] * E[units], axis=(0, 2))
+                           / np.sum(D[units] ** 2, axis=(0, 2)), 0, 1)
+        w = np.zeros((steps, m))
+        for k in range(steps):
+            for i in range(m):
+                worst = [max(np.sum((E[u, k, :, i] - g * D[u, k, :, i]) ** 2)
+                             / np.sum(E[u, k, :, i] ** 2) for u in units) for g in grid]
+                w[k, i] = grid[int(np.argmin(worst))]
+        return w
+
+    for rule in ("pooled", "worst"):
+        ratio = np.zeros((3, steps, m))
+        for u in range(3):
+            w = choose([v for v in range(3) if v != u], rule)
+            ratio[u] = np.sqrt(sse(u, w) / np.sum(E[u] ** 2, axis=1))
+        kept = {"every": np.all(ratio < 1, axis=0), "mean": np.mean(ratio, axis=0) < 1}
+        # every: kept on output 0 but at step 4 (unit 0), closed on output 1 (unit 2)
+        assert kept["every"][:3, 0].all() and not kept["every"][3, 0]
+        assert not kept["every"][:, 1].any()
+        assert kept["mean"][0, 1] and (kept["mean"] != kept["every"]).sum() == 1
+        full = choose([0, 1, 2], rule)
+        W = np.stack([1 - full, full], axis=2)
+        for need in ("every", "mean"):
+            gated, got = held_out_gate(W, G, b, c, [0, 1], rule, need=need)
+            np.testing.assert_array_equal(got, kept[need])
+            expect = np.where(kept[need][..., None], W, np.array([1.0, 0.0]))
+            np.testing.assert_allclose(gated, expect, atol=1e-12)
+    with pytest.raises(ValueError, match="need"):
+        held_out_gate(W, G, b, c, [0, 1], "worst", need="median")

@@ -68,14 +68,18 @@ def register(subparsers) -> None:
     add_validation_option(p, "TRAIN records validate arx_kstep's choices (the ARX orders, "
                              "the network's structure and epoch count, whether it is kept; "
                              "then it is refitted on all TRAIN)")
-    p.add_argument("--blend-design", default=None, choices=["flights", "types"],
+    p.add_argument("--blend-design", default=None, choices=["auto", "flights", "types"],
                    help="arx_kstep: where the blend's weights are chosen: flights: on the "
                         "validation records (session 8's design); types: type out (each "
-                        "trajectory type of TRAIN held out in turn from the components' "
-                        "training, the direct multi-step predictor kept where it lowers the "
-                        "type-out score; evaluate.crossfold.AnchoredFitter, the design of "
-                        "docs/examples/nanodrone/anchored/; needs two types in TRAIN) "
-                        "(default: flights)")
+                        "trajectory type of TRAIN, the file name's prefix up to the first "
+                        "'_', held out in turn from the components' training, the direct "
+                        "multi-step predictor kept where it lowers the type-out score, each "
+                        "step's and group's weights the ARX's alone unless the held-out types "
+                        "prefer the blend there on the mean; evaluate.crossfold.AnchoredFitter, "
+                        "the "
+                        "design of docs/examples/nanodrone/anchored/; needs two types in "
+                        "TRAIN); auto: types when TRAIN holds two or more types, else flights "
+                        "(default: auto)")
     p.add_argument("--weighting", default=None, choices=["flat", "naive"],
                    help="quad_hybrid: the steps' errors alike, or each over the naive "
                         "predictor's error at that step (default: the model's)")
@@ -357,9 +361,9 @@ def _anchored(args, train, read) -> int:
         if max(fit.lengths) <= K + 1:
             raise CliError(f"--horizon: windows of {K} steps do not fit in any segment of the "
                            f"fitted records (the longest has {max(fit.lengths)} samples)")
-    design = args.blend_design or "flights"
+    design = args.blend_design or "auto"
     fitter = AnchoredFitter(grid=grid, fixed=fixed, groups=groups, blend_design=design,
-                            direct=design == "types", **({} if groups else {"blind": ()}))
+                            direct=design != "flights", **({} if groups else {"blind": ()}))
     t = time.perf_counter()
     try:
         model = fitter(train, fit, valid)
@@ -395,12 +399,20 @@ def _anchored(args, train, read) -> int:
     if c.get("blend_weights") is not None:
         where = "type out over " + ", ".join(c["type_out"]["types"]) if c.get("type_out") \
             else "on validation"
-        print(f"  blended per step and group (weights chosen {where}) of: "
+        print(f"  blended per step and group (blend design {c['blend_design']}"
+              + (f", asked {c['blend_design_asked']}" if c.get("blend_design_asked") !=
+                 c["blend_design"] else "") + f"; weights chosen {where}) of: "
               + ", ".join(c.get("blend_components", [])))
+        gate = (c.get("type_out") or {}).get("gate")
+        if gate:
+            closed = sum(len(v) for v in gate["closed"])
+            print(f"  the ARX's weights alone (the held-out types did not prefer the blend) "
+                  f"at {closed} of {sum(len(v) for v in gate['kept'])} steps x groups")
     print(f"  wall time {seconds:.0f} s (selection {c['select_seconds']:.0f} s, final fit on "
           f"all TRAIN {c['fit_seconds']:.0f} s)")
     choice = {k: c[k] for k in ("arx_orders", "validation", "chosen", "epochs", "structure",
                                 "anchor_features", "blend_components", "blend_design",
+                                "blend_design_asked",
                                 "direct") if k in c}
     if c.get("type_out"):
         choice["type_out"] = {k: v for k, v in c["type_out"].items()

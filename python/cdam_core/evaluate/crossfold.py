@@ -35,15 +35,18 @@ from cdam_core.models.arx import FEATURES, ArxModel
 from cdam_core.models.arx_direct import ArxDirect
 from cdam_core.models.flight.physics import QuadPhysics
 from cdam_core.models.kstep_blend import RULES as BLEND_RULES
-from cdam_core.models.kstep_blend import KStepBlend, held_out_score, rule_weights
+from cdam_core.models.kstep_blend import GATES
+from cdam_core.models.kstep_blend import (KStepBlend, held_out_gate, held_out_ratios,
+                                         held_out_score, rule_weights)
 from cdam_core.record.realdata.nanodrone import load_nanodrone, trajectory_type
 from cdam_core.record.stack import Stack, stack_records
 
 BLENDS = ("none", "validation")
 #: where the blend's weights are chosen (``AnchoredFitter``): on the validation flights (one
-#: per training type; their types seen in training), or type out (each training type held out
-#: in turn from the components' training)
-BLEND_DESIGNS = ("flights", "types")
+#: per training type; their types seen in training), type out (each training type held out
+#: in turn from the components' training), or auto (type out when the training flights hold
+#: two or more types, else on the validation flights)
+BLEND_DESIGNS = ("flights", "types", "auto")
 
 __all__ = ["Fold", "cross_trajectory_fold", "mean_over_folds", "physics_effects_fold",
            "AnchoredFitter", "ANCHORED_GRID", "ANCHORED_FIXED", "ANCHORED_BLIND",
@@ -280,12 +283,12 @@ def _records_stack(st: Stack, keep) -> Stack:
                  record=st.record[idx], row=st.row[idx], datasets=st.datasets)
 
 
-def _train_types(train: Stack):
+def _train_types(train: Stack, need: bool = True):
     """(type of each record name, the sorted types the stack's rows hold); ValueError when
-    they are fewer than two (the type-out design's need)."""
+    they are fewer than two (the type-out design's need) and ``need``."""
     rtype = np.array([trajectory_type(n) for n in train.names])
     present = sorted(set(rtype[np.unique(train.record)]))
-    if len(present) < 2:
+    if need and len(present) < 2:
         raise ValueError(f"blend_design 'types': the training flights hold {len(present)} "
                          f"type(s); at least two are needed")
     return rtype, present
@@ -336,7 +339,19 @@ class AnchoredFitter:
       weights by the rule on the other held-out types, the RMSE relative to the raw ARX on
       this one, mean over types, steps and groups) is lower with it than without; else it is
       left out. Measured on the 17 flights (docs/examples/nanodrone/anchored/): 0.907-0.936
-      with it against 0.966-0.993 without, kept in all four folds.
+      with it against 0.966-0.993 without, kept in all four folds. The gate (session 10,
+      ``models.kstep_blend.held_out_gate``): the weights of a step and group are the raw
+      ARX's alone unless the held-out types prefer the blend there (the weights the rule
+      chooses on the other held-out types have a lower error than the raw ARX's; ``gate``:
+      ``"mean"`` (default): on the mean of the types' RMSE ratios, the criterion of the
+      direct predictor's decision applied per step and group; ``"every"``: on every type;
+      ``"none"``: no gate, session 9's model); the ungated and both gated weightings are
+      measured beside (``blends_["types_<rule>"]``, ``blends_["types_<rule>_<gate>"]``);
+    - ``"auto"`` (the CLI's default since session 10): ``"types"`` when the training flights
+      hold two or more trajectory types, else ``"flights"`` (the type-out design needs two;
+      on the four-way protocol, each fold three training types, the type-out design was below
+      the ARX at more horizons than the flights design on the mean and in the worst fold:
+      docs/examples/nanodrone/anchored/).
 
     ``cache``: a folder where trained networks are kept and reused (``_trained``).
     ``choices``: one record per call (anchor, orders, validation scores, chosen, epochs, blend
@@ -345,7 +360,7 @@ class AnchoredFitter:
     def __init__(self, grid=None, fixed=None, select_horizons=(1, 10, 25, 50),
                  arx_grid=ARX_GRID, groups=NANODRONE_GROUPS, blind=ANCHORED_BLIND,
                  anchor_features=("raw", "physics"), blend="validation", cache=None,
-                 blend_rule="worst", blend_design="flights", direct=False):
+                 blend_rule="worst", blend_design="flights", direct=False, gate="mean"):
         self.grid = dict(ANCHORED_GRID if grid is None else grid)
         self.fixed = dict(ANCHORED_FIXED if fixed is None else fixed)
         if not self.grid:
@@ -367,11 +382,14 @@ class AnchoredFitter:
         if blend_design not in BLEND_DESIGNS:
             raise ValueError(f"blend_design: unknown {blend_design!r}; use "
                              f"{' or '.join(BLEND_DESIGNS)}")
-        if direct and blend_design != "types":
+        if direct and blend_design == "flights":
             raise ValueError("direct: the direct predictor is decided type out; use "
-                             "blend_design='types'")
+                             "blend_design='types' or 'auto'")
         self.blend_design = blend_design
         self.direct = bool(direct)
+        if gate not in ("none", *GATES):
+            raise ValueError(f"gate: unknown {gate!r}; use none, {', '.join(GATES)}")
+        self.gate = gate
         self.choices = []
 
     def _trained(self, params, stack, valid=None):
@@ -417,8 +435,11 @@ class AnchoredFitter:
     def __call__(self, train, fit, valid):
         import time
 
-        if self.blend_design == "types":
+        design = self.blend_design
+        if design == "types":
             _train_types(train)            # fails before any fit
+        elif design == "auto":
+            design = "types" if len(_train_types(train, need=False)[1]) >= 2 else "flights"
         t = time.perf_counter()
         self.blends_ = {}
         anchors = {}                       # (features, orders) -> validation score
@@ -474,7 +495,7 @@ class AnchoredFitter:
         H = max(steps, int({**self.fixed, **self.grid[chosen]}.get("horizon", steps))) \
             if chosen != "arx" else steps
         direct, types, flights_w = None, None, None
-        if chosen != "arx" and self.blend == "validation" and self.blend_design == "types":
+        if chosen != "arx" and self.blend == "validation" and design == "types":
             if self.direct:
                 direct = self._direct_orders(feat, orders[2], fit, valid, H)
             types = self._type_out(train, arxs, direct, feat, H, common, chosen,
@@ -510,13 +531,17 @@ class AnchoredFitter:
             for r, wr in (types or {}).get("rule_weights", {}).items():
                 self.blends_[f"types_{r}"] = KStepBlend(final + [net], weights=np.asarray(wr),
                                                         groups=labels)
+            for need, g in (types or {}).get("gates", {}).items():
+                self.blends_[f"types_{self.blend_rule}_{need}"] = KStepBlend(
+                    final + [net], weights=np.asarray(g["weights"]), groups=labels)
         names = [f"{f} arx {','.join(map(str, o))}" for f, o in arxs]
         if keep_direct:
             names.append(f"{feat} direct {','.join(map(str, direct['orders']))}")
         self.choices.append({"arx_orders": list(orders), "anchor_features": feat,
                              "anchor_validation": {f"{f} {','.join(map(str, o))}": v
                                                    for (f, o), v in anchors.items()},
-                             "blend_design": self.blend_design, "blend_rule": self.blend_rule,
+                             "blend_design": design, "blend_design_asked": self.blend_design,
+                             "blend_rule": self.blend_rule,
                              "blend_components": names + ["network"],
                              "validation": val, "chosen": chosen,
                              "epochs": epochs.get(chosen), "structure": {} if chosen == "arx"
@@ -527,7 +552,9 @@ class AnchoredFitter:
                              "direct": direct,
                              "type_out": None if types is None else
                              {**{k: v for k, v in types.items()
-                                 if k not in ("weights", "rule_weights")},
+                                 if k not in ("weights", "rule_weights", "gates")},
+                              "gates_closed": {n: g["closed"] for n, g in
+                                               types.get("gates", {}).items()},
                               "other_rule_weights": {r: v for r, v in
                                                      types["rule_weights"].items()
                                                      if r != self.blend_rule}},
@@ -591,5 +618,19 @@ class AnchoredFitter:
             if not keep:
                 G, b = G[..., idx, :][..., idx], b[..., idx]
         W = {r: rule_weights(G, b, c, labels, r) for r in BLEND_RULES}
-        return {"weights": W[self.blend_rule], "types": present, "keep_direct": bool(keep),
-                "scores": scores, "rule_weights": {r: v.tolist() for r, v in W.items()}}
+        weights, gates = W[self.blend_rule], {}
+        ratios = held_out_ratios(G, b, c, labels, self.blend_rule)
+        for need in GATES:                 # every gate (the chosen one and those beside it)
+            gw, kept = held_out_gate(weights, G, b, c, labels, self.blend_rule, need=need,
+                                     ratios=ratios)
+            gates[need] = {"weights": gw.tolist(), "kept": kept.astype(int).tolist(),
+                           "closed": [[int(k) + 1 for k in np.flatnonzero(~kept[:, j])]
+                                      for j in range(kept.shape[1])]}
+        if self.gate != "none":
+            weights = np.asarray(gates[self.gate]["weights"])
+        return {"weights": weights, "types": present, "keep_direct": bool(keep),
+                "scores": scores, "rule_weights": {r: v.tolist() for r, v in W.items()},
+                "gate": None if self.gate == "none" else
+                {"need": self.gate, "groups": [int(g) for g in np.unique(labels)],
+                 **{k: v for k, v in gates[self.gate].items() if k != "weights"}},
+                "gates": gates}

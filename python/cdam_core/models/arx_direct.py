@@ -94,7 +94,8 @@ class ArxDirect(ArxModel):
             T = Y[o[:, None] + np.arange(1, K + 1)[None, :]].reshape(len(o), K * m)
             G += X.T @ X
             B += X.T @ T
-        Xc = self._window(U, Y, cut, K)
+        # the windows cut by a segment's end (none when K = 1: every origin reaches step 1)
+        Xc = self._window(U, Y, cut, K) if cut.size else None
         self.coefs_ = []
         for k in range(2, K + 1):
             cols = self._columns(k)

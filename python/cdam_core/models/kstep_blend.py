@@ -36,7 +36,8 @@ from cdam_core.models.protocol import Model
 from cdam_core.models.schema import field_array
 
 __all__ = ["KStepBlend", "simplex_weights", "minimax_weights", "blend_sums", "simplex_grid",
-           "rule_weights", "unit_errors", "held_out_score", "RULES"]
+           "rule_weights", "unit_errors", "held_out_score", "held_out_ratios",
+           "held_out_gate", "GATES", "RULES"]
 
 
 def _qp_simplex(G, b):
@@ -152,25 +153,58 @@ def unit_errors(W, G, b, c):
             + np.einsum("hij,uhijl,hil->uhi", w, G, w))
 
 
-def held_out_score(G, b, c, labels, rule: str, resolution: int = 100) -> float:
-    """Leave-one-unit-out score of a rule: for each unit, the weights chosen by ``rule`` on
-    the other units and that unit's RMSE relative to the reference's (component 0) per step
-    and group; the mean over units, steps and groups (1: the reference; lower is better).
-    Needs at least two units."""
+def held_out_ratios(G, b, c, labels, rule: str, resolution: int = 100):
+    """Leave-one-unit-out ratios of a rule (units, steps, groups): for each unit, the weights
+    chosen by ``rule`` on the other units and that unit's RMSE relative to the reference's
+    (component 0) per step and group (groups in the order of ``np.unique(labels)``; 1: the
+    reference's error). Needs at least two units."""
     G, b, c = np.asarray(G, float), np.asarray(b, float), np.asarray(c, float)
     nu = b.shape[0]
     if nu < 2:
         raise ValueError(f"units: {nu} given; a held-out score needs at least two")
     lab = np.asarray(labels)
-    ratios = []
+    out = np.zeros((nu, b.shape[1], np.unique(lab).size))
     for u in range(nu):
         rest = [v for v in range(nu) if v != u]
         W = rule_weights(G[rest], b[rest], c[rest], labels, rule, resolution)
         f = unit_errors(W, G[u:u + 1], b[u:u + 1], c[u:u + 1])[0]        # (steps, m)
-        for g in np.unique(lab):
+        for j, g in enumerate(np.unique(lab)):
             num, den = f[:, lab == g].sum(axis=1), c[u][:, lab == g].sum(axis=1)
-            ratios.append(np.sqrt(np.clip(num, 0, None) / np.where(den > 0, den, 1.0)))
-    return float(np.mean(ratios))
+            out[u, :, j] = np.sqrt(np.clip(num, 0, None) / np.where(den > 0, den, 1.0))
+    return out
+
+
+def held_out_score(G, b, c, labels, rule: str, resolution: int = 100) -> float:
+    """Leave-one-unit-out score of a rule: ``held_out_ratios`` averaged over units, steps and
+    groups (1: the reference; lower is better). Needs at least two units."""
+    return float(np.mean(held_out_ratios(G, b, c, labels, rule, resolution)))
+
+
+GATES = ("every", "mean")
+
+
+def held_out_gate(W, G, b, c, labels, rule: str, resolution: int = 100, need: str = "every",
+                  ratios=None):
+    """The weights W (steps, m, J + 1) with each step's and group's weights replaced by the
+    reference alone (component 0) where the held-out units do not prefer the blend: the blend
+    is kept at step k in group g only when the weights ``rule`` chooses on the other units
+    have a lower error there than the reference on every unit (``need="every"``:
+    ``held_out_ratios`` < 1 for every unit) or on the mean over the units (``need="mean"``:
+    their mean < 1, the criterion ``held_out_score`` applies to the whole curve). ``ratios``:
+    ``held_out_ratios``' result when already computed. Returns (gated weights, kept
+    (steps, groups) bool)."""
+    if need not in GATES:
+        raise ValueError(f"need: unknown {need!r}; use {' or '.join(GATES)}")
+    W = np.array(W, dtype=float, copy=True)
+    lab = np.asarray(labels)
+    r = held_out_ratios(G, b, c, labels, rule, resolution) if ratios is None else \
+        np.asarray(ratios, float)
+    kept = np.all(r < 1.0, axis=0) if need == "every" else np.mean(r, axis=0) < 1.0
+    for j, g in enumerate(np.unique(lab)):
+        for k in np.flatnonzero(~kept[:, j]):
+            W[k, lab == g] = 0.0
+            W[k, lab == g, 0] = 1.0
+    return W, kept
 
 
 class KStepBlend(Model):
