@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['GREYBOX_TAPE_OPS', 'Rng', 'SIM_CONTROL_SIZE', 'SIM_NLOG', 'SIM_NSP', 'SIM_NU', 'SIM_NX', 'SIM_PLANT_SIZE', 'bp_fitness', 'cancel_native_loops', 'five_point_cubic_smooth', 'greybox_rollout', 'kstep_jacobian', 'kstep_normal', 'kstep_num_params', 'kstep_train_lm', 'minmax_apply', 'minmax_fit', 'mlp_forward', 'mlp_jacobian', 'mlp_jtj', 'mlp_mse_gradient', 'mlp_num_params', 'narx_regressors', 'narx_simulate', 'optimise', 'sim_closed_loop', 'sim_fastest_rate', 'sim_open_loop', 'sim_rhs', 'sim_substeps', 'train_gd', 'train_lm']
+__all__: list[str] = ['GREYBOX_STICK_SLIP', 'GREYBOX_TAPE_OPS', 'Rng', 'SIM_CONTROL_SIZE', 'SIM_NLOG', 'SIM_NSP', 'SIM_NU', 'SIM_NX', 'SIM_PLANT_SIZE', 'bp_fitness', 'cancel_native_loops', 'five_point_cubic_smooth', 'greybox_rollout', 'kstep_jacobian', 'kstep_normal', 'kstep_num_params', 'kstep_train_lm', 'minmax_apply', 'minmax_fit', 'mlp_forward', 'mlp_jacobian', 'mlp_jtj', 'mlp_mse_gradient', 'mlp_num_params', 'narx_regressors', 'narx_simulate', 'optimise', 'sim_closed_loop', 'sim_fastest_rate', 'sim_open_loop', 'sim_rhs', 'sim_substeps', 'train_gd', 'train_lm']
 class Rng:
     """
     xoshiro128** with splitmix32 seeding; the numpy twin draws the same stream.
@@ -34,9 +34,9 @@ def five_point_cubic_smooth(y: numpy.ndarray, passes: typing.SupportsInt | typin
     """
     Five-point cubic smoothing, `passes` times, per column of a (N,) or (N, C) array.
     """
-def greybox_rollout(op: typing.Annotated[numpy.typing.ArrayLike, numpy.int32], a: typing.Annotated[numpy.typing.ArrayLike, numpy.int32], b: typing.Annotated[numpy.typing.ArrayLike, numpy.int32], c: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], outputs: typing.Annotated[numpy.typing.ArrayLike, numpy.int32], series: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], theta: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], inverse: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], x0: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], v0: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], starts: typing.Annotated[numpy.typing.ArrayLike, numpy.int64], steps: typing.SupportsInt | typing.SupportsIndex, substeps: typing.SupportsInt | typing.SupportsIndex, rk4: bool, dt: typing.SupportsFloat | typing.SupportsIndex, t_start: typing.SupportsFloat | typing.SupportsIndex, path: bool) -> tuple[numpy.typing.NDArray[numpy.float64], int]:
+def greybox_rollout(op: typing.Annotated[numpy.typing.ArrayLike, numpy.int32], a: typing.Annotated[numpy.typing.ArrayLike, numpy.int32], b: typing.Annotated[numpy.typing.ArrayLike, numpy.int32], c: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], outputs: typing.Annotated[numpy.typing.ArrayLike, numpy.int32], series: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], theta: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], inverse: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], x0: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], v0: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], starts: typing.Annotated[numpy.typing.ArrayLike, numpy.int64], steps: typing.SupportsInt | typing.SupportsIndex, substeps: typing.SupportsInt | typing.SupportsIndex, rk4: bool, dt: typing.SupportsFloat | typing.SupportsIndex, t_start: typing.SupportsFloat | typing.SupportsIndex, path: bool, sticky: typing.Annotated[numpy.typing.ArrayLike, numpy.int32] = ...) -> tuple[numpy.typing.NDArray[numpy.float64], int]:
     """
-    Integrate a grey-box model given as a tape (models/greybox/trace.py) over every lane; returns (positions, diverged row or -1): (steps, lanes, positions) with path, else (lanes, positions).
+    Integrate a grey-box model given as a tape (models/greybox/trace.py) over every lane (rk4: the switching nodes, sign and comparisons, held over each step's stages; the coordinates flagged in `sticky` stick and slip, models/greybox/stickslip.py); returns (positions, diverged row or -1): (steps, lanes, positions) with path, else (lanes, positions).
     """
 def kstep_jacobian(theta: numpy.ndarray, S: numpy.ndarray, E: numpy.ndarray, D: numpy.ndarray, starts: numpy.ndarray, K: typing.SupportsInt | typing.SupportsIndex, hidden: typing.SupportsInt | typing.SupportsIndex, in_mean: numpy.ndarray, in_scale: numpy.ndarray, out_scale: numpy.ndarray, err_scale: numpy.ndarray, step_weight: typing.Any = None, lin: typing.Any = None) -> tuple[numpy.typing.NDArray[numpy.float64], numpy.typing.NDArray[numpy.float64]]:
     """
@@ -118,6 +118,7 @@ def train_lm(theta0: numpy.ndarray, X: numpy.ndarray, T: numpy.ndarray, hidden: 
     """
     Levenberg-Marquardt with trainlm's semantics; returns (theta, history). Bit-identical for any thread count.
     """
+GREYBOX_STICK_SLIP: int = 1
 GREYBOX_TAPE_OPS: int = 25
 SIM_CONTROL_SIZE: int = 26
 SIM_NLOG: int = 10
