@@ -65,6 +65,8 @@ def _effect_from_dict(d: dict, where: str) -> Effect:
         default = fields[key].default
         if isinstance(default, bool):
             ok = isinstance(value, bool)
+        elif isinstance(default, int):   # a count of samples (rest_reach)
+            ok = isinstance(value, int) and not isinstance(value, bool) and value >= 0
         elif isinstance(default, float):
             ok = isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value)
             value = float(value) if ok else value

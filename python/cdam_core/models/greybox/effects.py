@@ -103,6 +103,10 @@ class CoulombFriction(Effect):
     # rows whose velocity is within this of zero are left out of the fit: at rest the dry
     # friction is anywhere in [-Fc, Fc] (stiction) and a sign regressor is wrong there
     rest_speed: float = 0.0
+    # and the rows within this many samples of a stop (a run at rest longer than this): the
+    # zero-phase derivative filter's impulse response mixes each row with its neighbours over
+    # its main lobe, so there the filtered state is mostly the stop's (see cutoff.at_rest)
+    rest_reach: int = 0
     name = "coulomb_friction"
     edge_identified = True   # eps = 0 (a plain sign) at the edge of the search is a valid answer
     search_grid = 7          # coarse grid, then a bounded 1-D search (selection._fit_with)
@@ -129,7 +133,29 @@ class CoulombFriction(Effect):
         """Rows the fit may use (None: all): away from rest, see ``rest_speed``."""
         if self.rest_speed <= 0:
             return None
-        return np.abs(np.asarray(s[model.viscous[self.channel][1]], dtype=float)) > self.rest_speed
+        rest = np.abs(np.asarray(s[model.viscous[self.channel][1]], dtype=float)) <= self.rest_speed
+        reach = int(self.rest_reach)
+        if reach > 0 and rest.any():
+            # only stops the filter resolves: runs at rest (joined across moving gaps shorter
+            # than the main lobe, which the filter does not resolve either: the noise of a
+            # quantised velocity crossing the rest level inside a stop) longer than the main
+            # lobe's half-width; a shorter run is, at the filter's resolution, the velocity
+            # crossing zero (the equation holds on both sides, only the run itself is left out)
+            edge = np.diff(np.r_[0, rest.astype(np.int8), 0])
+            start, end = np.flatnonzero(edge == 1), np.flatnonzero(edge == -1)
+            runs = []
+            for a, b in zip(start, end):
+                if runs and a - runs[-1][1] <= 2 * reach:
+                    runs[-1][1] = b
+                else:
+                    runs.append([a, b])
+            stop = np.zeros(rest.size + 1)
+            for a, b in runs:
+                if b - a > reach:
+                    stop[max(a - reach, 0)] += 1
+                    stop[min(b + reach, rest.size)] -= 1
+            rest = rest | (np.cumsum(stop[:-1]) > 0)
+        return ~rest
 
     def parameters(self, theta, model):
         out = super().parameters(theta, model)
