@@ -166,21 +166,35 @@ def _free_run_r(model, U, Y) -> float:
     return mean_pearson(Y[model.t0:], P[model.t0:])
 
 
-def _blocked_r(U, Y, blocks: int, fit_rest) -> float:
-    """Mean over ``blocks`` contiguous blocks of the free-run mean r on the block of
-    ``fit_rest(U, Y, segments)`` fitted on the rest (two records, no regressor across the
-    gap); -inf when a fit or a free run fails."""
+def _block_fits(U, Y, blocks: int, fit_rest) -> list:
+    """[(a, b, model)]: ``fit_rest(U, Y, segments)`` fitted on all of (U, Y) but the block
+    rows a..b-1 (two records, no regressor across the gap), for ``blocks`` contiguous blocks;
+    None when a fit fails or the block is too short to run on."""
     n = len(U)
     if blocks < 2:
         raise ValueError(f"blocks: must be >= 2, got {blocks}")
-    rs = []
+    out = []
     for k in range(blocks):
         a, b = n * k // blocks, n * (k + 1) // blocks
         keep = np.r_[0:a, b:n]
         try:
             m = fit_rest(U[keep], Y[keep], [x for x in (a, n - b) if x > 0])
             if b - a <= m.t0 + 2:
-                return float("-inf")
+                return None
+        except ValueError:
+            return None
+        out.append((a, b, m))
+    return out
+
+
+def _blocks_r(U, Y, fits) -> float:
+    """Mean over the blocks of ``fits`` (:func:`_block_fits`) of the free-run mean r of each
+    block's model on its block; -inf when a fit or a free run failed."""
+    if fits is None:
+        return float("-inf")
+    rs = []
+    for a, b, m in fits:
+        try:
             r = _free_run_r(m, U[a:b], Y[a:b])
         except ValueError:
             return float("-inf")
@@ -188,6 +202,13 @@ def _blocked_r(U, Y, blocks: int, fit_rest) -> float:
             return float("-inf")
         rs.append(r)
     return float(np.mean(rs))
+
+
+def _blocked_r(U, Y, blocks: int, fit_rest) -> float:
+    """Mean over ``blocks`` contiguous blocks of the free-run mean r on the block of
+    ``fit_rest(U, Y, segments)`` fitted on the rest (two records, no regressor across the
+    gap); -inf when a fit or a free run fails."""
+    return _blocks_r(U, Y, _block_fits(U, Y, blocks, fit_rest))
 
 
 def blocked_free_run_r(U, Y, narx, features="raw", blocks: int = 4) -> float:
@@ -211,7 +232,10 @@ class HybridSelection:
     validation_r: dict          # {"arx": r, "network": r}: blocked r of the chosen structure
     candidates: list = field(default_factory=list)    # (d, s, narx, features, blocked r)
     networks: list = field(default_factory=list)      # (hidden, seed, blocked r, ARX's)
-    network_models: list = field(default_factory=list)   # the fitted candidates, same order
+    network_models: list = field(default_factory=list)   # the fitted single networks, same order
+    ensembles: list = field(default_factory=list)     # (hidden, K, weight, blocked r)
+    ensemble_models: list = field(default_factory=list)  # the fitted candidates, same order
+    chosen: tuple | None = None                       # (hidden, K, weight) of the best candidate
 
     def to_json(self) -> dict:
         return {"decimation": self.decimation, "smoothing_passes": self.smoothing_passes,
@@ -223,7 +247,12 @@ class HybridSelection:
                                          for d, s, o, f, r in self.candidates],
                 "network_candidates": [{"hidden": h, "seed": sd, "validation_r_network": rn,
                                         "validation_r_arx": ra}
-                                       for h, sd, rn, ra in self.networks]}
+                                       for h, sd, rn, ra in self.networks],
+                "ensemble_candidates": [{"hidden": h, "members": k, "weight": w,
+                                         "validation_r": r}
+                                        for h, k, w, r in self.ensembles],
+                "chosen": None if self.chosen is None else dict(zip(
+                    ("hidden", "members", "weight"), self.chosen))}
 
 
 def _residual_fitter(algo, hidden, seed, iterations, lm_epochs):
@@ -232,8 +261,9 @@ def _residual_fitter(algo, hidden, seed, iterations, lm_epochs):
     cfg = IdentifyConfig(hidden=int(hidden), iterations=iterations, lm_epochs=lm_epochs,
                          smoothing_passes=0, threads=1)
 
-    def fit(X, R):
-        return identify(algo, X, R, seed=int(seed), config=cfg, preprocessed=True).model
+    def fit(X, R, member=0):
+        return identify(algo, X, R, seed=int(seed) + member, config=cfg,
+                        preprocessed=True).model
     return fit
 
 
@@ -249,7 +279,7 @@ def blocked_hybrid_r(U, Y, narx, features, fit_residual, blocks: int = 4) -> flo
 def select_hybrid(U, Y, *, decimations=(1, 2, 4, 8), passes=(0, 1, 3, 5), orders=(2, 3, 4, 6),
                   delays=(0, 1), features=("raw", "physics"), blocks: int = 4,
                   hidden=(3, 5, 10), seeds=range(4), algo: str = "iboa", iterations: int = 20,
-                  lm_epochs: int = 30) -> HybridSelection:
+                  lm_epochs: int = 30, weights=(0.25, 0.5, 0.75, 1.0)) -> HybridSelection:
     """The AR.Drone target's model from the training part (U, Y) alone (module doc)."""
     from cdam_core.models.hybrid import HybridNarx
     U = np.asarray(U, float)
@@ -272,21 +302,52 @@ def select_hybrid(U, Y, *, decimations=(1, 2, 4, 8), passes=(0, 1, 3, 5), orders
         raise ValueError("U, Y: no structure could be fitted and run free (record too short?)")
     d, s, narx, f, score = best
     Us, Ys = smooth_pair(U[::d], Y[::d], s)
-    nets, models, chosen = [], [], None
+    seeds = [int(x) for x in seeds]
+    ws = sorted({float(w) for w in weights} - {0.0})
+    if not seeds or not ws or any(not 0.0 < w <= 1.0 for w in ws):
+        raise ValueError("seeds, weights: need at least one seed and one weight in (0, 1]")
+    nets, models, ens, ens_models = [], [], [], []
     for h in hidden:
+        # each seed's network fitted on every block's rest and on the whole training part
+        fits, wholes = [], []
         for seed in seeds:
             fit = _residual_fitter(algo, h, seed, iterations, lm_epochs)
-            rn = blocked_hybrid_r(Us, Ys, narx, f, fit, blocks)
+            bf = _block_fits(Us, Ys, blocks, lambda Ur, Yr, seg: HybridNarx(
+                narx, f, fit_residual=fit).fit_with_weight(Ur, Yr, 1, segments=seg))
             m = HybridNarx(narx, f, fit_residual=fit).fit_with_weight(Us, Ys, 1)
-            nets.append((int(h), int(seed), float(rn), float(score)))
+            nets.append((int(h), int(seed), _blocks_r(Us, Ys, bf), float(score)))
             models.append(m)
-            if chosen is None or rn > chosen[1]:
-                chosen = (m, rn)
-    m, rn = chosen
+            fits.append(bf)
+            wholes.append(m)
+        # the candidates: the seeds' mean network (K = len(seeds)) at each weight, scored on
+        # the same blocks (each block's ARX is the same least-squares fit for every seed)
+        for w in ws:
+            bf = None if any(x is None for x in fits) else [
+                (a, b, _ensemble([fs[k][2] for fs in fits], w)) for k, (a, b, _) in
+                enumerate(fits[0])]
+            ens.append((int(h), len(seeds), w, _blocks_r(Us, Ys, bf)))
+            ens_models.append(_ensemble(wholes, w))
+    k_best = max(range(len(ens)), key=lambda k: ens[k][3])
+    h, K, w, rn = ens[k_best]
+    m = ens_models[k_best]
     kept = bool(rn > score)
-    m.residual_weight_ = 1.0 if kept else 0.0
+    m.residual_weight_ = w if kept else 0.0
     return HybridSelection(d, s, narx, f, float(score), m, kept,
-                           {"arx": float(score), "network": float(rn)}, cands, nets, models)
+                           {"arx": float(score), "network": float(rn)}, cands, nets, models,
+                           ens, ens_models, (h, K, w))
+
+
+def _ensemble(models, weight):
+    """A copy of ``models[0]`` (HybridNarx fitted on the same rows by different seeds: the
+    same ARX part) with the mean of the models' networks at ``weight``."""
+    from copy import copy
+
+    from cdam_core.models.network import mean_network
+    m = copy(models[0])
+    m.members_ = [x.net_ for x in models]
+    m.net_ = mean_network(m.members_)
+    m.residual_weight_ = float(weight)
+    return m
 
 
 @dataclass
@@ -364,16 +425,21 @@ def ardrone_comparison(ds, split: float = 0.75, algos=PAPER_ALGOS, variants=("st
     rows.append(_row("arx", arx, Ud[nd:], Yd[nd:], outputs, rate / d, t,
                      f"chosen by blocked validation on the training part: {choice}"))
     details = sel.to_json()
+    # test r of every candidate: reported beside, never used to choose
     for c, m in zip(details["network_candidates"], sel.network_models):
+        c["test_r_network"] = _free_run_r(m, Ud[nd:], Yd[nd:])
+    for c, m in zip(details["ensemble_candidates"], sel.ensemble_models):
         if m is sel.model:
             c["chosen"] = True
         w = m.residual_weight_
-        m.residual_weight_ = 1.0              # reported beside, never used to choose
-        c["test_r_network"] = _free_run_r(m, Ud[nd:], Yd[nd:])
+        m.residual_weight_ = c["weight"]
+        c["test_r"] = _free_run_r(m, Ud[nd:], Yd[nd:])
         m.residual_weight_ = w
+    h, k, w = sel.chosen
     rows.append(_row("hybrid_selected", sel.model, Ud[nd:], Yd[nd:], outputs, rate / d, t,
-                     f"{choice}; network {'kept' if sel.network_kept else 'switched off'} "
-                     f"on validation (r {sel.validation_r['network']:.3f} with, "
+                     f"{choice}; mean of {k} networks (hidden {h}) at weight {w:g} "
+                     f"{'kept' if sel.network_kept else 'switched off'} on validation "
+                     f"(r {sel.validation_r['network']:.3f} with, "
                      f"{sel.validation_r['arx']:.3f} without)", details))
     rows.append(ArdroneRow("quad_physics", None, None, None,
                            "not applicable: the record has PWM commands and Euler angles, "
