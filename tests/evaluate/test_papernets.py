@@ -286,10 +286,10 @@ def test_select_hybrid_chooses_the_seeds_mean_and_its_weight_on_the_blocks():
     grid = dict(iterations=2, lm_epochs=4)
     sel = select_hybrid(U, Y, decimations=(1,), passes=(0,), orders=(1,), delays=(1,),
                         features=("raw",), blocks=3, hidden=(2, 3), seeds=(0, 1),
-                        weights=(0.5, 1.0), **grid)
-    assert [(h, k, w) for h, k, w, _ in sel.ensembles] == [(2, 2, 0.5), (2, 2, 1.0),
-                                                           (3, 2, 0.5), (3, 2, 1.0)]
-    for h, _, w, rb in sel.ensembles[1:3]:
+                        weights=(0.5, 1.0), training=("one_step",), **grid)
+    assert [(h, k, w) for h, k, w, _, _ in sel.ensembles] == [(2, 2, 0.5), (2, 2, 1.0),
+                                                              (3, 2, 0.5), (3, 2, 1.0)]
+    for h, _, w, rb, _ in sel.ensembles[1:3]:
         ref = HybridNarx((1, 1, 1), "raw", ensemble=2, weights=(w,), validation_blocks=3,
                          fit_residual=_residual_fitter("iboa", h, 0, grid["iterations"],
                                                        grid["lm_epochs"])).fit(U, Y)
@@ -297,10 +297,10 @@ def test_select_hybrid_chooses_the_seeds_mean_and_its_weight_on_the_blocks():
     arx = blocked_free_run_r(U, Y, (1, 1, 1), "raw", blocks=3)
     assert sel.validation_r["arx"] == arx
     best = max(sel.ensembles, key=lambda c: c[3])
-    assert sel.chosen == best[:3] and sel.validation_r["network"] == best[3]
+    assert sel.chosen == best[:3] + best[4:] and sel.validation_r["network"] == best[3]
     assert sel.network_kept == (best[3] > arx)
     assert sel.model.residual_weight_ == (best[2] if sel.network_kept else 0.0)
-    singles = [m for (h, _, _, _), m in zip(sel.networks, sel.network_models) if h == best[0]]
+    singles = [m for (h, *_), m in zip(sel.networks, sel.network_models) if h == best[0]]
     X = U[:-1]
     np.testing.assert_allclose(sel.model.net_.predict(X),
                                np.mean([m.net_.predict(X) for m in singles], axis=0),

@@ -194,3 +194,36 @@ def test_ensemble_weights_chosen_on_blocks_against_numpy():
     np.testing.assert_array_equal(m.predict(U, Y, mode="free_run"),
                                   ArxModel((2, 2, 0), "physics").fit(U, Y).predict(
                                       U, Y, mode="free_run"))
+
+
+def test_free_run_training_lowers_the_numpy_free_run_error():
+    """training="free_run": the one-step network refined by LM on the hybrid's free-run error.
+    The cost it reports before and after, recomputed here: the ARX (numpy least squares) run
+    free with the network's term added (the recursion written out), its error over the std of
+    the ARX's own free-run error per output; the refined network's is lower."""
+    U, Y = _plant(n=400)
+    calls = []
+
+    def spy(X, R):
+        calls.append(BPNetwork(hidden=3, epochs=10, seed=0, threads=1).fit(X, R))
+        return calls[-1]
+    m = HybridNarx((2, 2, 0), "physics", fit_residual=spy, training="free_run",
+                   refine_epochs=4).fit_with_weight(U, Y, 1)
+    t0 = 2
+    F = _features(U, np.abs(U).max(axis=0))
+    W = np.linalg.lstsq(_design(F, Y), Y[t0:], rcond=None)[0]
+    X = np.c_[F[t0:], F[t0 - 1:-1]]
+    E = Y[t0:] - _free_run(W, F, Y[:t0], np.zeros((len(X), 2)))
+    s = E.std(axis=0)
+
+    def cost(net):
+        return np.mean(((Y[t0:] - _free_run(W, F, Y[:t0], _numpy_net(net, X))) / s) ** 2)
+    hist = m.net_.history_["mse"]
+    assert hist[0] == pytest.approx(cost(calls[0]), rel=1e-9)
+    assert hist[-1] == pytest.approx(cost(m.net_), rel=1e-9)
+    assert len(hist) > 1 and cost(m.net_) < cost(calls[0])
+    np.testing.assert_allclose(m.predict(U, Y, mode="free_run")[t0:],
+                               _free_run(W, F, Y[:t0], _numpy_net(m.net_, X)),
+                               rtol=1e-8, atol=1e-9)
+    with pytest.raises(ValueError, match="training: unknown 'k_step'"):
+        HybridNarx((2, 2, 0), training="k_step").fit(U, Y)

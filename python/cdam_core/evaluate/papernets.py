@@ -231,11 +231,11 @@ class HybridSelection:
     network_kept: bool
     validation_r: dict          # {"arx": r, "network": r}: blocked r of the chosen structure
     candidates: list = field(default_factory=list)    # (d, s, narx, features, blocked r)
-    networks: list = field(default_factory=list)      # (hidden, seed, blocked r, ARX's)
+    networks: list = field(default_factory=list)  # (hidden, seed, blocked r, ARX's, training)
     network_models: list = field(default_factory=list)   # the fitted single networks, same order
-    ensembles: list = field(default_factory=list)     # (hidden, K, weight, blocked r)
+    ensembles: list = field(default_factory=list)   # (hidden, K, weight, blocked r, training)
     ensemble_models: list = field(default_factory=list)  # the fitted candidates, same order
-    chosen: tuple | None = None                       # (hidden, K, weight) of the best candidate
+    chosen: tuple | None = None         # (hidden, K, weight, training) of the best candidate
 
     def to_json(self) -> dict:
         return {"decimation": self.decimation, "smoothing_passes": self.smoothing_passes,
@@ -246,13 +246,13 @@ class HybridSelection:
                                           "narx": list(o), "features": f, "blocked_r": r}
                                          for d, s, o, f, r in self.candidates],
                 "network_candidates": [{"hidden": h, "seed": sd, "validation_r_network": rn,
-                                        "validation_r_arx": ra}
-                                       for h, sd, rn, ra in self.networks],
+                                        "validation_r_arx": ra, "training": tr}
+                                       for h, sd, rn, ra, tr in self.networks],
                 "ensemble_candidates": [{"hidden": h, "members": k, "weight": w,
-                                         "validation_r": r}
-                                        for h, k, w, r in self.ensembles],
+                                         "validation_r": r, "training": tr}
+                                        for h, k, w, r, tr in self.ensembles],
                 "chosen": None if self.chosen is None else dict(zip(
-                    ("hidden", "members", "weight"), self.chosen))}
+                    ("hidden", "members", "weight", "training"), self.chosen))}
 
 
 def _residual_fitter(algo, hidden, seed, iterations, lm_epochs):
@@ -279,7 +279,8 @@ def blocked_hybrid_r(U, Y, narx, features, fit_residual, blocks: int = 4) -> flo
 def select_hybrid(U, Y, *, decimations=(1, 2, 4, 8), passes=(0, 1, 3, 5), orders=(2, 3, 4, 6),
                   delays=(0, 1), features=("raw", "physics"), blocks: int = 4,
                   hidden=(3, 5, 10), seeds=range(4), algo: str = "iboa", iterations: int = 20,
-                  lm_epochs: int = 30, weights=(0.25, 0.5, 0.75, 1.0)) -> HybridSelection:
+                  lm_epochs: int = 30, weights=(0.25, 0.5, 0.75, 1.0),
+                  training=("one_step", "free_run"), refine_epochs: int = 10) -> HybridSelection:
     """The AR.Drone target's model from the training part (U, Y) alone (module doc)."""
     from cdam_core.models.hybrid import HybridNarx
     U = np.asarray(U, float)
@@ -307,15 +308,16 @@ def select_hybrid(U, Y, *, decimations=(1, 2, 4, 8), passes=(0, 1, 3, 5), orders
     if not seeds or not ws or any(not 0.0 < w <= 1.0 for w in ws):
         raise ValueError("seeds, weights: need at least one seed and one weight in (0, 1]")
     nets, models, ens, ens_models = [], [], [], []
-    for h in hidden:
+    for tr, h in [(tr, h) for tr in training for h in hidden]:
+        kw = dict(training=tr, refine_epochs=int(refine_epochs))
         # each seed's network fitted on every block's rest and on the whole training part
         fits, wholes = [], []
         for seed in seeds:
             fit = _residual_fitter(algo, h, seed, iterations, lm_epochs)
             bf = _block_fits(Us, Ys, blocks, lambda Ur, Yr, seg: HybridNarx(
-                narx, f, fit_residual=fit).fit_with_weight(Ur, Yr, 1, segments=seg))
-            m = HybridNarx(narx, f, fit_residual=fit).fit_with_weight(Us, Ys, 1)
-            nets.append((int(h), int(seed), _blocks_r(Us, Ys, bf), float(score)))
+                narx, f, fit_residual=fit, **kw).fit_with_weight(Ur, Yr, 1, segments=seg))
+            m = HybridNarx(narx, f, fit_residual=fit, **kw).fit_with_weight(Us, Ys, 1)
+            nets.append((int(h), int(seed), _blocks_r(Us, Ys, bf), float(score), tr))
             models.append(m)
             fits.append(bf)
             wholes.append(m)
@@ -325,16 +327,18 @@ def select_hybrid(U, Y, *, decimations=(1, 2, 4, 8), passes=(0, 1, 3, 5), orders
             bf = None if any(x is None for x in fits) else [
                 (a, b, _ensemble([fs[k][2] for fs in fits], w)) for k, (a, b, _) in
                 enumerate(fits[0])]
-            ens.append((int(h), len(seeds), w, _blocks_r(Us, Ys, bf)))
+            ens.append((int(h), len(seeds), w, _blocks_r(Us, Ys, bf), tr))
             ens_models.append(_ensemble(wholes, w))
+    if not ens:
+        raise ValueError("hidden, training: no network candidate")
     k_best = max(range(len(ens)), key=lambda k: ens[k][3])
-    h, K, w, rn = ens[k_best]
+    h, K, w, rn, tr = ens[k_best]
     m = ens_models[k_best]
     kept = bool(rn > score)
     m.residual_weight_ = w if kept else 0.0
     return HybridSelection(d, s, narx, f, float(score), m, kept,
                            {"arx": float(score), "network": float(rn)}, cands, nets, models,
-                           ens, ens_models, (h, K, w))
+                           ens, ens_models, (h, K, w, tr))
 
 
 def _ensemble(models, weight):
@@ -435,9 +439,10 @@ def ardrone_comparison(ds, split: float = 0.75, algos=PAPER_ALGOS, variants=("st
         m.residual_weight_ = c["weight"]
         c["test_r"] = _free_run_r(m, Ud[nd:], Yd[nd:])
         m.residual_weight_ = w
-    h, k, w = sel.chosen
+    h, k, w, tr = sel.chosen
     rows.append(_row("hybrid_selected", sel.model, Ud[nd:], Yd[nd:], outputs, rate / d, t,
-                     f"{choice}; mean of {k} networks (hidden {h}) at weight {w:g} "
+                     f"{choice}; mean of {k} networks (hidden {h}, {tr.replace('_', '-')} "
+                     f"training) at weight {w:g} "
                      f"{'kept' if sel.network_kept else 'switched off'} on validation "
                      f"(r {sel.validation_r['network']:.3f} with, "
                      f"{sel.validation_r['arx']:.3f} without)", details))

@@ -38,7 +38,11 @@ from cdam_core.models.arx import ArxModel, lagged, physics_features
 from cdam_core.models.network import BPNetwork, mean_network
 from cdam_core.models.protocol import segment_bounds
 
-__all__ = ["HybridNarx"]
+__all__ = ["HybridNarx", "TRAINING", "refine_free_run"]
+
+#: how the residual networks are trained: on the ARX's one-step residual, or that fit refined
+#: on the free-run error of the hybrid (:func:`refine_free_run`)
+TRAINING = ("one_step", "free_run")
 
 
 def _default_residual_fitter(seed: int):
@@ -54,6 +58,81 @@ def _check_weight(w, name="weight") -> float:
     if not 0.0 <= w <= 1.0:
         raise ValueError(f"{name}: must be in [0, 1], got {w!r}")
     return w
+
+
+def _filter_ar(X, Wy, na):
+    """Z (N, ...) with Z(t) = sum_j Wy_j' Z(t-1-j) + X(t), Z = 0 before row 0: the ARX's
+    output recursion (``ArxModel._free_run``) driven by X; Wy (na m, m), Wy_j its rows
+    j m .. (j + 1) m; X (N, m) or (N, m, D) (a Jacobian, filtered column by column)."""
+    m = Wy.shape[1]
+    Ws = [Wy[j * m:(j + 1) * m].T for j in range(na)]
+    Z = np.zeros_like(X)
+    for t in range(X.shape[0]):
+        z = X[t].copy()
+        for j in range(min(na, t)):
+            z += Ws[j] @ Z[t - 1 - j]
+        Z[t] = z
+    return Z
+
+
+def refine_free_run(net, Wy, na, parts, epochs: int = 20, mu: float = 1e-3):
+    """A copy of the static network ``net`` refined by Levenberg-Marquardt on the free-run
+    error of the model it corrects: ``parts`` [(X, E)], per record the network's inputs
+    (rows t0..) and E the ARX's free-run error there (measured minus the ARX run free from
+    the record's first t0 measured rows); the network's term N(X) reaches the free run through
+    the ARX's output recursion (:func:`_filter_ar`, coefficients Wy of ``na`` lags), so the
+    cost is sum ||(E - G N(X)) / s||^2, s the std of E per output over all records (every
+    output weighs alike, as in the mean r). The Jacobian is the network's
+    (``_core.mlp_jacobian``) through the same recursion. Steps that do not lower the cost are
+    refused (mu x 10), so the refined network is never worse than ``net`` on this cost.
+    ``history_["mse"]``: the cost per accepted step, over the rows and outputs."""
+    from copy import deepcopy
+
+    from cdam_core import _core
+    out = deepcopy(net)
+    m, h = int(net.n_outputs_), int(net.hidden_)
+    span = (net.scaler_y_.data_max_ - net.scaler_y_.data_min_) / 2.0
+    s = np.std(np.vstack([E for _, E in parts]), axis=0)
+    s = np.where(s > 0, s, 1.0)
+    Xs = [net.scaler_x_.transform(X) for X, _ in parts]
+
+    def cost_jac(theta, jac):
+        errs, jacs = [], []
+        for Xk, (_, E) in zip(Xs, parts):
+            Ys = _core.mlp_forward(theta, Xk, h, m, net.activation)
+            N = net.scaler_y_.inverse_transform(Ys)
+            errs.append(((E - _filter_ar(N, Wy, na)) / s).ravel())
+            if jac:
+                J = _core.mlp_jacobian(theta, Xk, h, m, net.activation).reshape(len(Xk), m, -1)
+                J *= span[None, :, None]
+                jacs.append((_filter_ar(J, Wy, na) / s[None, :, None]).reshape(len(Xk) * m, -1))
+        e = np.concatenate(errs)
+        return e, (np.vstack(jacs) if jac else None)
+
+    theta = np.asarray(out.theta_, np.float64).copy()
+    e, J = cost_jac(theta, True)
+    hist = [float(e @ e / e.size)]
+    for _ in range(int(epochs)):
+        g, H = J.T @ e, J.T @ J
+        step_ok = False
+        while mu < 1e10:
+            try:
+                d = np.linalg.solve(H + mu * np.eye(len(theta)), g)
+            except np.linalg.LinAlgError:
+                mu *= 10
+                continue
+            e2, _ = cost_jac(theta + d, False)
+            if np.all(np.isfinite(e2)) and e2 @ e2 < e @ e:
+                theta, mu, step_ok = theta + d, mu * 0.1, True
+                break
+            mu *= 10
+        if not step_ok:
+            break
+        e, J = cost_jac(theta, True)
+        hist.append(float(e @ e / e.size))
+    out.theta_ = theta.astype(np.asarray(net.theta_).dtype)
+    out.history_ = {"mse": hist}
+    return out
 
 
 class HybridNarx(ArxModel):
@@ -75,19 +154,25 @@ class HybridNarx(ArxModel):
         ensemble: K, the number of residual networks averaged (module doc).
         weights: the candidate weights alpha of the network's correction, in [0, 1]; 0 (the
             ARX alone) is always a candidate.
+        training: "one_step" (each network fitted on the ARX's one-step residual) or
+            "free_run" (that fit then refined by LM on the hybrid's free-run error over the
+            rows it is fitted on, ``refine_epochs`` epochs: :func:`refine_free_run`).
     """
 
     kind = "hybrid"
     fits_segments = False   # the residual network is trained on one record
 
     def __init__(self, narx=(3, 3, 0), features="raw", fit_residual=None, seed=0,
-                 validation_fraction=0.2, ensemble=1, weights=(0.0, 1.0), validation_blocks=0):
+                 validation_fraction=0.2, ensemble=1, weights=(0.0, 1.0), validation_blocks=0,
+                 training="one_step", refine_epochs=20):
         self.seed = seed                   # all stored as given (scikit-learn's clone)
         self.fit_residual = fit_residual
         self.validation_fraction = validation_fraction
         self.ensemble = ensemble
         self.weights = weights
         self.validation_blocks = validation_blocks
+        self.training = training
+        self.refine_epochs = refine_epochs
         super().__init__(narx, features)
 
     def _check_params(self) -> None:
@@ -99,6 +184,9 @@ class HybridNarx(ArxModel):
         if self.fit_residual is not None and not callable(self.fit_residual):
             raise ValueError("fit_residual: must be callable (X, R) -> fitted BPNetwork")
         positive_int(self.ensemble, "ensemble")
+        if self.training not in TRAINING:
+            raise ValueError(f"training: unknown {self.training!r}; use 'one_step' or 'free_run'")
+        positive_int(self.refine_epochs, "refine_epochs", minimum=0)
         if positive_int(self.validation_blocks, "validation_blocks", minimum=0) == 1:
             raise ValueError("validation_blocks: must be 0 (the tail) or >= 2")
         self._weights()
@@ -213,6 +301,12 @@ class HybridNarx(ArxModel):
         for net in members:
             if not isinstance(net, BPNetwork) or net.narx is not None:
                 raise ValueError("fit_residual: must return a fitted static BPNetwork")
+        if self.training == "free_run":
+            na, m = self.orders.na, self.n_outputs_
+            runs = [(p[0], Y[a + t0:b] - ArxModel._free_run(self, U[a:b], Y[a:a + t0]))
+                    for p, (a, b) in zip(parts, [x for x in bounds if x[1] - x[0] > t0])]
+            members = [refine_free_run(n, self.coef_[:na * m], na, runs,
+                                       int(self.refine_epochs)) for n in members]
         self.members_ = members
         self.net_ = mean_network(members)
 
