@@ -156,10 +156,11 @@ def test_cli_identify_hybrid_ensemble_and_weights(tmp_path, capsys):
             "--narx", "2,2,0"]
     m = tmp_path / "m.json"
     assert main(args + ["--ensemble", "2", "--residual-weights", "0.5,1",
-                        "--validation-blocks", "3", "--save", str(m),
-                        "--json", str(tmp_path / "o.json")]) == 0
+                        "--validation-blocks", "3", "--residual-training", "free_run",
+                        "--save", str(m), "--json", str(tmp_path / "o.json")]) == 0
     cfg = json.loads((tmp_path / "o.json").read_text())["config"]
-    assert (cfg["ensemble"], cfg["residual_weights"], cfg["validation_blocks"]) == (2, [0.5, 1.0], 3)
+    assert (cfg["ensemble"], cfg["residual_weights"], cfg["validation_blocks"],
+            cfg["residual_training"]) == (2, [0.5, 1.0], 3, "free_run")
     loaded = load_model(m)
     assert loaded.residual_weight_ in (0.0, 0.5, 1.0) and loaded.net_.hidden_ == 6
     capsys.readouterr()

@@ -99,6 +99,9 @@ def register(subparsers) -> None:
     p.add_argument("--validation-blocks", type=int, default=None,
                    help="hybrid: choose the weight on B contiguous blocks of the training "
                         "part, each held out in turn (default: 0, the last 20 %%)")
+    p.add_argument("--residual-training", default=None, choices=["one_step", "free_run"],
+                   help="hybrid: each network fitted on the ARX's one-step residual, or that "
+                        "fit refined by LM on the hybrid's free-run error (default: one_step)")
     p.add_argument("--inputs", default=None, help="comma-separated input columns")
     p.add_argument("--outputs", default=None, help="comma-separated output columns")
     p.add_argument("--smoothing", type=int, default=5, help="five-point smoothing passes")
@@ -120,7 +123,8 @@ def _hybrid_options(args) -> dict:
     """IdentifyConfig fields of --ensemble, --residual-weights, --validation-blocks (only with
     --model hybrid)."""
     given = {"ensemble": args.ensemble, "residual_weights": args.residual_weights,
-             "validation_blocks": args.validation_blocks}
+             "validation_blocks": args.validation_blocks,
+             "residual_training": args.residual_training}
     given = {k: v for k, v in given.items() if v is not None}
     if given and args.model != "hybrid":
         raise CliError(f"--{next(iter(given)).replace('_', '-')}: needs --model hybrid")

@@ -72,6 +72,7 @@ class IdentifyConfig:
     ensemble: int = 1             # hybrid: residual networks averaged (seeds seed .. seed+K-1)
     residual_weights: tuple = (0.0, 1.0)   # hybrid: candidate weights of the network's term
     validation_blocks: int = 0    # hybrid: 0: choose the weight on the last 20 %; B: B blocks
+    residual_training: str = "one_step"   # hybrid: "one_step" or "free_run" (HybridNarx)
 
     def __post_init__(self):
         if self.hidden != "auto" and (not isinstance(self.hidden, (int, np.integer))
@@ -108,7 +109,8 @@ class IdentifyConfig:
             from cdam_core.models.hybrid import HybridNarx
             HybridNarx(self.narx, self.features, ensemble=self.ensemble,
                        weights=self.residual_weights,
-                       validation_blocks=self.validation_blocks)._check_params()
+                       validation_blocks=self.validation_blocks,
+                       training=self.residual_training)._check_params()
             self.residual_weights = tuple(float(w) for w in self.residual_weights)
         lb, ub = (float(b) for b in self.bounds)
         if not (np.isfinite(lb) and np.isfinite(ub) and lb < ub):
@@ -237,7 +239,7 @@ def _identify_hybrid(algo, U, Y, seed, cfg, t_start) -> IdentifyRun:
     net_cfg = IdentifyConfig(**{**cfg.to_dict(), "narx": None, "smoothing_passes": 0,
                                 "bounds": tuple(cfg.bounds), "model": "bp", "features": "raw",
                                 "residual_weights": (0.0, 1.0), "ensemble": 1,
-                                "validation_blocks": 0})
+                                "validation_blocks": 0, "residual_training": "one_step"})
     runs = []
 
     def fit_residual(X, R, member=0):
@@ -246,7 +248,8 @@ def _identify_hybrid(algo, U, Y, seed, cfg, t_start) -> IdentifyRun:
 
     model = HybridNarx(cfg.narx, cfg.features, fit_residual=fit_residual, seed=seed,
                        ensemble=cfg.ensemble, weights=cfg.residual_weights,
-                       validation_blocks=cfg.validation_blocks).fit(U, Y)
+                       validation_blocks=cfg.validation_blocks,
+                       training=cfg.residual_training).fit(U, Y)
     run = runs[-1]        # the model's (last) network: refitted on the whole record when kept
     total = time.perf_counter() - t_start
     return IdentifyRun(algo=algo, seed=seed, model=model, curve=run.curve,
