@@ -25,7 +25,7 @@ optimiser iterations and LM epochs, a one-point hybrid grid) to check the output
 The committed report docs/examples/papernets/ is
 ``python docs/examples/nanodrone/cross_trajectory.py docs/examples/papernets --paper-networks
 --ardrone`` (about 20 minutes here, on a busy 2-core machine); docs/examples/ardrone/ is the
-AR.Drone part alone, ``... docs/examples/ardrone --no-flights --ardrone`` (31 s CPU).
+AR.Drone part alone, ``... docs/examples/ardrone --no-flights --ardrone`` (194 s CPU).
 """
 import os
 
