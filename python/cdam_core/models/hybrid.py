@@ -75,7 +75,7 @@ def _filter_ar(X, Wy, na):
     return Z
 
 
-def refine_free_run(net, Wy, na, parts, epochs: int = 20, mu: float = 1e-3):
+def refine_free_run(net, Wy, na, parts, epochs: int = 10, mu: float = 1e-3):
     """A copy of the static network ``net`` refined by Levenberg-Marquardt on the free-run
     error of the model it corrects: ``parts`` [(X, E)], per record the network's inputs
     (rows t0..) and E the ARX's free-run error there (measured minus the ARX run free from
@@ -164,7 +164,7 @@ class HybridNarx(ArxModel):
 
     def __init__(self, narx=(3, 3, 0), features="raw", fit_residual=None, seed=0,
                  validation_fraction=0.2, ensemble=1, weights=(0.0, 1.0), validation_blocks=0,
-                 training="one_step", refine_epochs=20):
+                 training="one_step", refine_epochs=10):
         self.seed = seed                   # all stored as given (scikit-learn's clone)
         self.fit_residual = fit_residual
         self.validation_fraction = validation_fraction
