@@ -163,6 +163,14 @@ def test_cli_identify_hybrid_ensemble_and_weights(tmp_path, capsys):
             cfg["residual_training"]) == (2, [0.5, 1.0], 3, "free_run")
     loaded = load_model(m)
     assert loaded.residual_weight_ in (0.0, 0.5, 1.0) and loaded.net_.hidden_ == 6
+    # a weight between 0 and 1 is a valid model file (schema and reader)
+    from cdam_core.models.file import save_model
+    loaded.residual_weight_ = 0.5
+    save_model(tmp_path / "m2.json", loaded, inputs=["u1", "u2"], outputs=["y1", "y2"])
+    again = load_model(tmp_path / "m2.json")
+    assert again.residual_weight_ == 0.5
+    np.testing.assert_array_equal(again.predict(U, Y, mode="free_run"),
+                                  loaded.predict(U, Y, mode="free_run"))
     capsys.readouterr()
     for extra, msg in ((["--ensemble", "0"], "--ensemble: must be >= 1"),
                        (["--residual-weights", "0,2"], "--residual-weights: must be in [0, 1]"),
