@@ -227,3 +227,32 @@ def test_free_run_training_lowers_the_numpy_free_run_error():
                                rtol=1e-8, atol=1e-9)
     with pytest.raises(ValueError, match="training: unknown 'k_step'"):
         HybridNarx((2, 2, 0), training="k_step").fit(U, Y)
+
+
+def test_free_run_error_and_its_jacobian_against_numpy_and_finite_differences():
+    """The refinement's cost terms: e = (E - G N(X)) / s with G the output recursion
+    Z(t) = A1' Z(t-1) + A2' Z(t-2) + N(t) written out here, per record; its Jacobian against
+    central differences of e."""
+    from cdam_core.models.hybrid import free_run_error
+    g = np.random.default_rng(7)
+    X = g.normal(size=(60, 3))
+    net = BPNetwork(hidden=2, epochs=3, seed=1, threads=1).fit(X, g.normal(size=(60, 2)))
+    Wy = np.r_[[[0.5, 0.1], [-0.2, 0.4]], [[0.2, 0.0], [0.05, -0.1]]]   # rows: lag 1, lag 2
+    parts = [(X[:35], g.normal(size=(35, 2))), (X[35:], g.normal(size=(25, 2)))]
+    s = np.array([0.7, 1.3])
+    theta = np.asarray(net.theta_, float)
+    e, J = free_run_error(net, theta, Wy, 2, parts, s)
+    want = []
+    for Xk, E in parts:
+        N = _numpy_net(net, Xk)
+        Z = np.zeros_like(N)
+        for t in range(len(N)):
+            Z[t] = N[t] + (Z[t - 1] @ Wy[:2] if t >= 1 else 0) + (Z[t - 2] @ Wy[2:] if t >= 2 else 0)
+        want.append(((E - Z) / s).ravel())
+    np.testing.assert_allclose(e, np.concatenate(want), rtol=1e-10, atol=1e-12)
+    h = 1e-6
+    fd = np.column_stack([
+        (free_run_error(net, theta - h * d, Wy, 2, parts, s, False)[0]
+         - free_run_error(net, theta + h * d, Wy, 2, parts, s, False)[0]) / (2 * h)
+        for d in np.eye(theta.size)])
+    np.testing.assert_allclose(J, fd, rtol=1e-5, atol=1e-7)

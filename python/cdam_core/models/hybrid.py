@@ -38,7 +38,7 @@ from cdam_core.models.arx import ArxModel, lagged, physics_features
 from cdam_core.models.network import BPNetwork, mean_network
 from cdam_core.models.protocol import segment_bounds
 
-__all__ = ["HybridNarx", "TRAINING", "refine_free_run"]
+__all__ = ["HybridNarx", "TRAINING", "free_run_error", "refine_free_run"]
 
 #: how the residual networks are trained: on the ARX's one-step residual, or that fit refined
 #: on the free-run error of the hybrid (:func:`refine_free_run`)
@@ -87,27 +87,12 @@ def refine_free_run(net, Wy, na, parts, epochs: int = 10, mu: float = 1e-3):
     refused (mu x 10), so the refined network is never worse than ``net`` on this cost.
     ``history_["mse"]``: the cost per accepted step, over the rows and outputs."""
     from copy import deepcopy
-
-    from cdam_core import _core
     out = deepcopy(net)
-    m, h = int(net.n_outputs_), int(net.hidden_)
-    span = (net.scaler_y_.data_max_ - net.scaler_y_.data_min_) / 2.0
     s = np.std(np.vstack([E for _, E in parts]), axis=0)
     s = np.where(s > 0, s, 1.0)
-    Xs = [net.scaler_x_.transform(X) for X, _ in parts]
 
     def cost_jac(theta, jac):
-        errs, jacs = [], []
-        for Xk, (_, E) in zip(Xs, parts):
-            Ys = _core.mlp_forward(theta, Xk, h, m, net.activation)
-            N = net.scaler_y_.inverse_transform(Ys)
-            errs.append(((E - _filter_ar(N, Wy, na)) / s).ravel())
-            if jac:
-                J = _core.mlp_jacobian(theta, Xk, h, m, net.activation).reshape(len(Xk), m, -1)
-                J *= span[None, :, None]
-                jacs.append((_filter_ar(J, Wy, na) / s[None, :, None]).reshape(len(Xk) * m, -1))
-        e = np.concatenate(errs)
-        return e, (np.vstack(jacs) if jac else None)
+        return free_run_error(net, theta, Wy, na, parts, s, jac)
 
     theta = np.asarray(out.theta_, np.float64).copy()
     e, J = cost_jac(theta, True)
@@ -133,6 +118,26 @@ def refine_free_run(net, Wy, na, parts, epochs: int = 10, mu: float = 1e-3):
     out.theta_ = theta.astype(np.asarray(net.theta_).dtype)
     out.history_ = {"mse": hist}
     return out
+
+
+def free_run_error(net, theta, Wy, na, parts, s, jac: bool = True):
+    """(e, J) of :func:`refine_free_run`'s cost at weights ``theta`` of ``net``'s structure
+    (its scalers, hidden size, activation): e the stacked errors (E - G N(X)) / s, row-major
+    per record (rows, outputs); J (e.size, theta.size) their derivative with the sign of
+    G N, i.e. d(G N / s) / d theta (None when not ``jac``)."""
+    from cdam_core import _core
+    m, h = int(net.n_outputs_), int(net.hidden_)
+    span = (net.scaler_y_.data_max_ - net.scaler_y_.data_min_) / 2.0
+    errs, jacs = [], []
+    for X, E in parts:
+        Xk = net.scaler_x_.transform(X)
+        N = net.scaler_y_.inverse_transform(_core.mlp_forward(theta, Xk, h, m, net.activation))
+        errs.append(((E - _filter_ar(N, Wy, na)) / s).ravel())
+        if jac:
+            J = _core.mlp_jacobian(theta, Xk, h, m, net.activation).reshape(len(Xk), m, -1)
+            J *= span[None, :, None]
+            jacs.append((_filter_ar(J, Wy, na) / s[None, :, None]).reshape(len(Xk) * m, -1))
+    return np.concatenate(errs), (np.vstack(jacs) if jac else None)
 
 
 class HybridNarx(ArxModel):
