@@ -72,7 +72,7 @@ def ardrone(bundled_record):
 @pytest.fixture(scope="module")
 def rows(ardrone):
     grid = dict(decimations=(8,), passes=(0,), orders=(2,), delays=(1,), features=("raw",),
-                hidden=(2,), seeds=(0,), iterations=1, lm_epochs=1)
+                hidden=(2,), seeds=(0,), iterations=1, lm_epochs=1, refine_epochs=1)
     return ardrone_comparison(ardrone, algos=("iboa",), variants=("static",),
                               paper_overrides=dict(iterations=1, lm_epochs=1, hidden=2),
                               hybrid=grid)

@@ -171,7 +171,7 @@ def _ardrone_section(out, folds, mean, md, js, quick, ardrone=True) -> int:
         t0 = time.perf_counter()
         hybrid = dict(decimations=(4,), passes=(0,), orders=(2,), delays=(0,),
                       features=("physics",), hidden=(3,), seeds=(0,), iterations=2,
-                      lm_epochs=2) if quick else None
+                      lm_epochs=2, refine_epochs=1) if quick else None
         rows = ardrone_comparison(load_ardrone2(), paper_overrides=quick, hybrid=hybrid)
         print(f"## AR.Drone ({time.perf_counter() - t0:.0f} s)\n{ardrone_table(rows)}\n",
               flush=True)
