@@ -72,7 +72,7 @@ def ardrone(bundled_record):
 @pytest.fixture(scope="module")
 def rows(ardrone):
     grid = dict(decimations=(8,), passes=(0,), orders=(2,), delays=(1,), features=("raw",),
-                hidden=(2,), seeds=(0,), iterations=1, lm_epochs=1)
+                hidden=(2,), seeds=(0,), iterations=1, lm_epochs=1, refine_epochs=1)
     return ardrone_comparison(ardrone, algos=("iboa",), variants=("static",),
                               paper_overrides=dict(iterations=1, lm_epochs=1, hidden=2),
                               hybrid=grid)
@@ -127,18 +127,24 @@ def test_blocked_score_against_numpy():
     assert got == pytest.approx(np.mean(rs), abs=1e-10)
 
 
-def test_blocked_hybrid_score_against_numpy():
-    """The hybrid's blocked score: on each of 3 blocks the ARX is fitted on the rest (numpy
-    least squares, two records), the network on its one-step residual rows of both records
-    (a spy checks what it is given), the two run free on the block: ARX recursion plus the
-    network's term on u(t-1), written out here."""
+def _tanh_plant(n=300):
+    """Two inputs through a tanh into a first-order linear recursion (seed 4)."""
     r = np.random.default_rng(4)
-    n = 300
     U = r.normal(size=(n, 2))
     Y = np.zeros((n, 2))
     for t in range(1, n):
         Y[t] = 0.8 * Y[t - 1] + np.tanh(2 * U[t - 1]) @ np.array([[1.0, 0.3], [-0.5, 0.7]]) \
             + 0.05 * r.normal(size=2)
+    return U, Y
+
+
+def test_blocked_hybrid_score_against_numpy():
+    """The hybrid's blocked score: on each of 3 blocks the ARX is fitted on the rest (numpy
+    least squares, two records), the network on its one-step residual rows of both records
+    (a spy checks what it is given), the two run free on the block: ARX recursion plus the
+    network's term on u(t-1), written out here."""
+    U, Y = _tanh_plant()
+    n = len(U)
     nets = []
 
     def spy(X, R):
@@ -267,3 +273,35 @@ def test_chosen_network_decides_on_the_validation_flights():
         ChosenNetworkFitter(grid={"lm_goal": ()})
     with pytest.raises(ValueError, match="algo: unknown 'pso'"):
         ChosenNetworkFitter("pso")
+
+
+def test_select_hybrid_chooses_the_seeds_mean_and_its_weight_on_the_blocks():
+    """The candidates are the seeds' mean network at each weight; each one's blocked r is
+    HybridNarx's blocked score with the same networks (checked against numpy in
+    tests/identify/test_hybrid_validation.py); the best is kept only above the ARX's blocked r,
+    and the model's network is the numpy mean of the seeds' networks fitted on the whole part."""
+    from cdam_core.evaluate.papernets import _residual_fitter, select_hybrid
+    from cdam_core.models import HybridNarx
+    U, Y = _tanh_plant()
+    grid = dict(iterations=2, lm_epochs=4)
+    sel = select_hybrid(U, Y, decimations=(1,), passes=(0,), orders=(1,), delays=(1,),
+                        features=("raw",), blocks=3, hidden=(2, 3), seeds=(0, 1),
+                        weights=(0.5, 1.0), training=("one_step",), **grid)
+    assert [(h, k, w) for h, k, w, _, _ in sel.ensembles] == [(2, 2, 0.5), (2, 2, 1.0),
+                                                              (3, 2, 0.5), (3, 2, 1.0)]
+    for h, _, w, rb, _ in sel.ensembles[1:3]:
+        ref = HybridNarx((1, 1, 1), "raw", ensemble=2, weights=(w,), validation_blocks=3,
+                         fit_residual=_residual_fitter("iboa", h, 0, grid["iterations"],
+                                                       grid["lm_epochs"])).fit(U, Y)
+        assert rb == pytest.approx(ref.validation_r_[w], abs=1e-12)
+    arx = blocked_free_run_r(U, Y, (1, 1, 1), "raw", blocks=3)
+    assert sel.validation_r["arx"] == arx
+    best = max(sel.ensembles, key=lambda c: c[3])
+    assert sel.chosen == best[:3] + best[4:] and sel.validation_r["network"] == best[3]
+    assert sel.network_kept == (best[3] > arx)
+    assert sel.model.residual_weight_ == (best[2] if sel.network_kept else 0.0)
+    singles = [m for (h, *_), m in zip(sel.networks, sel.network_models) if h == best[0]]
+    X = U[:-1]
+    np.testing.assert_allclose(sel.model.net_.predict(X),
+                               np.mean([m.net_.predict(X) for m in singles], axis=0),
+                               rtol=1e-10, atol=1e-12)

@@ -137,3 +137,47 @@ def test_cli_identify_hybrid(tmp_path, capsys):
     assert loaded.kind == "hybrid" and loaded.input_names_ == ["u1", "u2"]
     P = loaded.predict(U, Y, mode="free_run")
     assert P.shape == Y.shape and np.all(np.isfinite(P))
+
+
+def test_cli_identify_hybrid_ensemble_and_weights(tmp_path, capsys):
+    """--ensemble, --residual-weights, --validation-blocks reach the model (K networks' mean,
+    a weight from the list or 0, chosen on the blocks) and are refused by name when bad."""
+    import json
+
+    from cdam_core import load_model
+    from cdam_core.cli.main import main
+    U, Y = _plant(n=600)
+    csv = tmp_path / "d.csv"
+    np.savetxt(csv, np.c_[np.arange(600) * 0.01, U, Y], delimiter=",",
+               header="t,u1,u2,y1,y2", comments="")
+    args = ["identify", str(csv), "--inputs", "u1,u2", "--outputs", "y1,y2", "--split", "0.7",
+            "--algo", "iboa", "--hidden", "3", "--iterations", "2", "--population", "6",
+            "--epochs", "5", "--smoothing", "0", "--quiet", "--model", "hybrid",
+            "--narx", "2,2,0"]
+    m = tmp_path / "m.json"
+    assert main(args + ["--ensemble", "2", "--residual-weights", "0.5,1",
+                        "--validation-blocks", "3", "--residual-training", "free_run",
+                        "--save", str(m), "--json", str(tmp_path / "o.json")]) == 0
+    cfg = json.loads((tmp_path / "o.json").read_text())["config"]
+    assert (cfg["ensemble"], cfg["residual_weights"], cfg["validation_blocks"],
+            cfg["residual_training"]) == (2, [0.5, 1.0], 3, "free_run")
+    loaded = load_model(m)
+    assert loaded.residual_weight_ in (0.0, 0.5, 1.0) and loaded.net_.hidden_ == 6
+    # a weight between 0 and 1 is a valid model file (schema and reader)
+    from cdam_core.models.file import save_model
+    loaded.residual_weight_ = 0.5
+    save_model(tmp_path / "m2.json", loaded, inputs=["u1", "u2"], outputs=["y1", "y2"])
+    again = load_model(tmp_path / "m2.json")
+    assert again.residual_weight_ == 0.5
+    np.testing.assert_array_equal(again.predict(U, Y, mode="free_run"),
+                                  loaded.predict(U, Y, mode="free_run"))
+    capsys.readouterr()
+    for extra, msg in ((["--ensemble", "0"], "--ensemble: must be >= 1"),
+                       (["--residual-weights", "0,2"], "--residual-weights: must be in [0, 1]"),
+                       (["--residual-weights", "x"], "--residual-weights: expected numbers"),
+                       (["--validation-blocks", "1"], "--validation-blocks: must be 0")):
+        assert main(args + extra) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("cdam identify: error: " + msg) and err.count("\n") == 1, err
+    assert main(args[:-4] + ["--ensemble", "2"]) == 2
+    assert "--ensemble: needs --model hybrid" in capsys.readouterr().err

@@ -130,7 +130,7 @@ def _rewrite(path, doc, rehash=True):
     (lambda d: d["model"]["network"].__setitem__("activation", "relu"), "model.network.activation"),
     (lambda d: d["preprocessing"].__setitem__("smoothing_passes", -1), "preprocessing.smoothing_passes"),
     (lambda d: d["model"].__setitem__("narx", [2, 2, 2**40]), "model.narx[2]"),
-    (lambda d: d["model"].__setitem__("residual_weight", 0.5), "model.residual_weight"),
+    (lambda d: d["model"].__setitem__("residual_weight", 1.5), "model.residual_weight"),
 ])
 def test_bad_fields_are_named(tmp_path, mutate, field):
     path, doc = _saved(tmp_path)

@@ -87,7 +87,9 @@ def test_clone_keeps_parameters_as_given_and_set_params_refuses_bad_values():
     assert not net.dynamic
     h = HybridNarx((2, 2, 1), seed=3)
     assert clone(h).get_params() == {"narx": (2, 2, 1), "features": "raw", "fit_residual": None,
-                                     "seed": 3, "validation_fraction": 0.2}
+                                     "seed": 3, "validation_fraction": 0.2, "ensemble": 1,
+                                     "weights": (0.0, 1.0), "validation_blocks": 0,
+                                     "training": "one_step", "refine_epochs": 10}
 
 
 def test_scaler_is_sklearn_minmax_to_minus_one_one():

@@ -90,6 +90,18 @@ def register(subparsers) -> None:
     p.add_argument("--features", default="raw", choices=["raw", "physics"],
                    help="hybrid inputs: raw, or physics (4 motor commands in X-mixer order: "
                         "commands, thrust ~ sum of squares, roll/pitch/yaw torque combinations)")
+    p.add_argument("--ensemble", type=int, default=None,
+                   help="hybrid: train K residual networks (seeds s .. s+K-1 for seed s) and "
+                        "use their mean (default: 1)")
+    p.add_argument("--residual-weights", default=None,
+                   help="hybrid: candidate weights in [0, 1] of the network's term, chosen on "
+                        "validation with 0 (the ARX alone) always among them (default: 0,1)")
+    p.add_argument("--validation-blocks", type=int, default=None,
+                   help="hybrid: choose the weight on B contiguous blocks of the training "
+                        "part, each held out in turn (default: 0, the last 20 %%)")
+    p.add_argument("--residual-training", default=None, choices=["one_step", "free_run"],
+                   help="hybrid: each network fitted on the ARX's one-step residual, or that "
+                        "fit refined by LM on the hybrid's free-run error (default: one_step)")
     p.add_argument("--inputs", default=None, help="comma-separated input columns")
     p.add_argument("--outputs", default=None, help="comma-separated output columns")
     p.add_argument("--smoothing", type=int, default=5, help="five-point smoothing passes")
@@ -107,6 +119,25 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
+def _hybrid_options(args) -> dict:
+    """IdentifyConfig fields of --ensemble, --residual-weights, --validation-blocks (only with
+    --model hybrid)."""
+    given = {"ensemble": args.ensemble, "residual_weights": args.residual_weights,
+             "validation_blocks": args.validation_blocks,
+             "residual_training": args.residual_training}
+    given = {k: v for k, v in given.items() if v is not None}
+    if given and args.model != "hybrid":
+        raise CliError(f"--{next(iter(given)).replace('_', '-')}: needs --model hybrid")
+    if "residual_weights" in given:
+        try:
+            given["residual_weights"] = tuple(float(v) for v in given["residual_weights"]
+                                              .split(","))
+        except ValueError:
+            raise CliError(f"--residual-weights: expected numbers in [0, 1] separated by "
+                           f"commas, got {args.residual_weights!r}") from None
+    return given
+
+
 def run(args) -> int:
     from cdam_core.record.columns import parse_column_map
     from cdam_core.record.stack import stack_records
@@ -121,6 +152,7 @@ def run(args) -> int:
         raise CliError("--seeds: must be >= 1")
     if args.split is not None and not 0 < args.split < 1:
         raise CliError(f"--split: must be in (0, 1), got {args.split}")
+    hyb = _hybrid_options(args)
     mapping = parse_column_map(args.map, "--map")
     read = dict(mapping=mapping, nan=args.nan, loader=args.loader)
     train = stack_records(args.train, inputs=args.inputs, outputs=args.outputs, **read)
@@ -168,10 +200,18 @@ def run(args) -> int:
         raise CliError("--features physics: needs --model hybrid")
     if args.features == "physics" and len(train.inputs) != 4:
         raise CliError(f"--features physics: needs 4 motor-command inputs, got {len(train.inputs)}")
-    cfg = IdentifyConfig(hidden=args.hidden, narx=parse_narx(args.narx),
-                         smoothing_passes=args.smoothing, iterations=args.iterations,
-                         population=args.population, lm_epochs=args.epochs, lm_goal=args.goal,
-                         model=args.model, features=args.features)
+    try:
+        cfg = IdentifyConfig(hidden=args.hidden, narx=parse_narx(args.narx),
+                             smoothing_passes=args.smoothing, iterations=args.iterations,
+                             population=args.population, lm_epochs=args.epochs,
+                             lm_goal=args.goal, model=args.model, features=args.features, **hyb)
+    except ValueError as exc:
+        msg = str(exc)
+        for field, opt in (("ensemble", "--ensemble"), ("weights", "--residual-weights"),
+                           ("validation_blocks", "--validation-blocks")):
+            if msg.startswith(field + ":"):
+                raise CliError(opt + msg[len(field):]) from None
+        raise
     algos = ["iboa", "boa", "cabc", "bp"] if args.algo == "all" else [args.algo]
     comparison = compare(algos, U, Y, records=records, seeds=range(args.seeds), config=cfg,
                          names=train.outputs, progress=show_progress(args),

@@ -69,6 +69,10 @@ class IdentifyConfig:
     features: str = "raw"         # "raw" or "physics" (hybrid only; identify/hybrid.py)
     max_rows: int | None = None   # bp: the optimiser and LM see at most this many evenly
                                   # spaced training rows (every ceil(rows / max_rows)-th)
+    ensemble: int = 1             # hybrid: residual networks averaged (seeds seed .. seed+K-1)
+    residual_weights: tuple = (0.0, 1.0)   # hybrid: candidate weights of the network's term
+    validation_blocks: int = 0    # hybrid: 0: choose the weight on the last 20 %; B: B blocks
+    residual_training: str = "one_step"   # hybrid: "one_step" or "free_run" (HybridNarx)
 
     def __post_init__(self):
         if self.hidden != "auto" and (not isinstance(self.hidden, (int, np.integer))
@@ -101,6 +105,13 @@ class IdentifyConfig:
             raise ValueError("features: 'physics' needs model='hybrid'")
         if self.model == "hybrid" and self.narx is None:
             raise ValueError("narx: model='hybrid' needs orders (na, nb, nk)")
+        if self.model == "hybrid":
+            from cdam_core.models.hybrid import HybridNarx
+            HybridNarx(self.narx, self.features, ensemble=self.ensemble,
+                       weights=self.residual_weights,
+                       validation_blocks=self.validation_blocks,
+                       training=self.residual_training)._check_params()
+            self.residual_weights = tuple(float(w) for w in self.residual_weights)
         lb, ub = (float(b) for b in self.bounds)
         if not (np.isfinite(lb) and np.isfinite(ub) and lb < ub):
             raise ValueError(f"bounds: expected finite (lb, ub) with lb < ub, got {self.bounds!r}")
@@ -129,6 +140,7 @@ class IdentifyConfig:
         d = asdict(self)
         d["bounds"] = list(self.bounds)
         d["narx"] = list(self.narx) if self.narx else None
+        d["residual_weights"] = list(self.residual_weights)
         return d
 
 
@@ -225,15 +237,20 @@ def identify(algo: str, U, Y, *, seed: int = 0, config: IdentifyConfig | None = 
 def _identify_hybrid(algo, U, Y, seed, cfg, t_start) -> IdentifyRun:
     """Linear ARX + ``algo``-BP network on its residual (:class:`cdam_core.models.HybridNarx`)."""
     net_cfg = IdentifyConfig(**{**cfg.to_dict(), "narx": None, "smoothing_passes": 0,
-                                "bounds": tuple(cfg.bounds), "model": "bp", "features": "raw"})
+                                "bounds": tuple(cfg.bounds), "model": "bp", "features": "raw",
+                                "residual_weights": (0.0, 1.0), "ensemble": 1,
+                                "validation_blocks": 0, "residual_training": "one_step"})
     runs = []
 
-    def fit_residual(X, R):
-        runs.append(identify(algo, X, R, seed=seed, config=net_cfg, preprocessed=True))
+    def fit_residual(X, R, member=0):
+        runs.append(identify(algo, X, R, seed=seed + member, config=net_cfg, preprocessed=True))
         return runs[-1].model
 
-    model = HybridNarx(cfg.narx, cfg.features, fit_residual=fit_residual, seed=seed).fit(U, Y)
-    run = runs[-1]        # the model's network: refitted on the whole record when kept
+    model = HybridNarx(cfg.narx, cfg.features, fit_residual=fit_residual, seed=seed,
+                       ensemble=cfg.ensemble, weights=cfg.residual_weights,
+                       validation_blocks=cfg.validation_blocks,
+                       training=cfg.residual_training).fit(U, Y)
+    run = runs[-1]        # the model's (last) network: refitted on the whole record when kept
     total = time.perf_counter() - t_start
     return IdentifyRun(algo=algo, seed=seed, model=model, curve=run.curve,
                        optimiser_mse=run.optimiser_mse, evaluations=run.evaluations,

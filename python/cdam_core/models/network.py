@@ -16,7 +16,7 @@ from cdam_core.models.protocol import Model, segment_bounds
 from cdam_core.models.schema import field_array
 from cdam_core.preprocess import MinMaxScaler
 
-__all__ = ["BPNetwork", "hidden_node_candidates"]
+__all__ = ["BPNetwork", "hidden_node_candidates", "mean_network"]
 
 
 def hidden_node_candidates(n_inputs: int, n_outputs: int, a_values=range(1, 11)) -> list[int]:
@@ -268,3 +268,54 @@ class BPNetwork(Model):
     def parameters(self) -> dict:
         self._check_fitted()
         return {f"theta[{k}]": (float(v), None) for k, v in enumerate(self.theta_)}
+
+
+def mean_network(nets) -> BPNetwork:
+    """One static :class:`BPNetwork` whose output is the mean of ``nets``' outputs (an
+    ensemble, e.g. the same network trained from several seeds), exactly: members fitted on the
+    same data share their min-max scalers, so the mean of their outputs is the back-scaling of
+    the mean of their scaled outputs, a network with the members' hidden units side by side
+    (K h units in all), output weights W2_k / K and output bias mean(b2_k). The result is a plain
+    network (model file, firmware, monitor take it as any other). ``nets``: fitted static
+    networks with the same activation, inputs, outputs and scalers (ValueError naming the
+    mismatch otherwise)."""
+    nets = list(nets)
+    if not nets:
+        raise ValueError("nets: need at least one fitted network")
+    first = nets[0]
+    for k, n in enumerate(nets):
+        if not isinstance(n, BPNetwork) or not n.is_fitted() or n.narx is not None:
+            raise ValueError(f"nets[{k}]: must be a fitted static BPNetwork")
+        if n.activation != first.activation:
+            raise ValueError(f"nets[{k}]: activation {n.activation!r} differs from "
+                             f"{first.activation!r}")
+        if (n.n_inputs_, n.n_outputs_) != (first.n_inputs_, first.n_outputs_):
+            raise ValueError(f"nets[{k}]: {n.n_inputs_} inputs, {n.n_outputs_} outputs differ "
+                             f"from {first.n_inputs_}, {first.n_outputs_}")
+        for name in ("scaler_x_", "scaler_y_"):
+            a, b = getattr(n, name), getattr(first, name)
+            if not (np.array_equal(a.data_min_, b.data_min_)
+                    and np.array_equal(a.data_max_, b.data_max_)):
+                raise ValueError(f"nets[{k}]: {name[:-1]} differs from nets[0]'s (members must "
+                                 "be fitted on the same data)")
+    if len(nets) == 1:
+        return first
+    i, m, K = int(first.n_inputs_), int(first.n_outputs_), len(nets)
+    dt = np.result_type(*(n.theta_.dtype for n in nets))
+    W1, b1, W2, b2 = [], [], [], []
+    for n in nets:
+        h = int(n.hidden_)
+        th = np.asarray(n.theta_, dt)
+        W1.append(th[:i * h].reshape(h, i, order="F"))
+        b1.append(th[i * h:i * h + h])
+        W2.append(th[i * h + h:i * h + h + h * m].reshape(m, h, order="F") / K)
+        b2.append(th[i * h + h + h * m:])
+    H = sum(int(n.hidden_) for n in nets)
+    out = BPNetwork(hidden=H, activation=first.activation, seed=first.seed)
+    out.theta_ = np.concatenate([np.vstack(W1).ravel(order="F"), np.concatenate(b1),
+                                 np.hstack(W2).ravel(order="F"), np.mean(b2, axis=0)]).astype(dt)
+    out.hidden_, out.n_inputs_, out.n_outputs_ = H, i, m
+    out.scaler_x_, out.scaler_y_ = first.scaler_x_, first.scaler_y_
+    out.history_ = None
+    out._target_1d = getattr(first, "_target_1d", False)
+    return out

@@ -110,11 +110,26 @@ def selection_md(details: dict, top: int = 8) -> list[str]:
     lines += [f"| {x['decimation']} | {x['smoothing_passes']} | "
               f"{','.join(map(str, x['narx']))} | {x['features']} | {_cell(x['blocked_r'])} |"
               for x in c]
-    lines += ["", "Networks on the ARX residual (validation: the same blocks, the hybrid fitted "
-              "on the rest; the test r is reported, never used to choose):", "",
-              "| hidden | seed | blocked mean r with network | blocked mean r ARX alone | "
-              "test r with network | chosen |", "|---|---|---|---|---|---|"]
-    lines += [f"| {x['hidden']} | {x['seed']} | {_cell(x['validation_r_network'])} | "
-              f"{_cell(x['validation_r_arx'])} | {_cell(x.get('test_r_network'))} | "
-              f"{'yes' if x.get('chosen') else ''} |" for x in details["network_candidates"]]
+    lines += ["", "Single networks on the ARX residual (each seed alone; validation: the same "
+              "blocks, the hybrid fitted on the rest; the test r is reported, never used to "
+              "choose; the candidates are the seeds' means below):", "",
+              "| training | hidden | seed | blocked mean r with network | "
+              "blocked mean r ARX alone | test r with network |", "|---|---|---|---|---|---|"]
+    lines += [f"| {x.get('training', 'one_step')} | {x['hidden']} | {x['seed']} | "
+              f"{_cell(x['validation_r_network'])} | "
+              f"{_cell(x['validation_r_arx'])} | {_cell(x.get('test_r_network'))} |"
+              for x in details["network_candidates"]]
+    ens = details.get("ensemble_candidates") or []
+    if ens:
+        arx = details["validation_r"]["arx"]
+        lines += ["", f"The candidates: hybrid = ARX + weight x (mean of the seeds' networks), "
+                  f"on the same blocks; the best is kept only if above the ARX alone "
+                  f"(blocked mean r {_cell(arx)}; network "
+                  f"{'kept' if details['network_kept'] else 'switched off'}):", "",
+                  "| training | hidden | networks | weight | blocked mean r | test r | chosen |",
+                  "|---|---|---|---|---|---|---|"]
+        lines += [f"| {x['training']} | {x['hidden']} | {x['members']} | {x['weight']:g} | "
+                  f"{_cell(x['validation_r'])} | {_cell(x.get('test_r'))} | "
+                  f"{('yes' if details['network_kept'] else 'best, not kept') if x.get('chosen') else ''} |"
+                  for x in ens]
     return lines
