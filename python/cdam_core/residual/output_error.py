@@ -56,10 +56,13 @@ MAX_RESTARTS = 3       # continuations after the sandwich's sigma is known (a ca
 DIFF_STEP = 1e-4   # relative step of the forward differences (scipy's diff_step)
 
 
-def refine(g, U, Y, starts, shooting, bounds: dict) -> tuple[dict, dict]:
+def refine(g, U, Y, starts, shooting, bounds: dict, sandwich=None) -> tuple[dict, dict]:
     """Minimise the multiple-shooting error of GreyBox ``g`` (fitted) over its estimated
     parameters on the windows at ``starts``; ``shooting(g, U, Y, starts)`` returns each
-    window's mean squared error after the initial-state projection. Returns (theta, info)."""
+    window's mean squared error after the initial-state projection. ``sandwich``: the
+    shooting the standard deviations are computed with (default ``shooting``; an iterated
+    state fit's window errors move in steps as windows converge at different iterations, and
+    differences of them are no sensitivities). Returns (theta, info)."""
     names = list(g.estimated_)
     th0 = np.array([g.theta_[p] for p in names], dtype=float)
     scale = np.where(np.abs(th0) > 0, np.abs(th0), 1.0)
@@ -116,7 +119,8 @@ def refine(g, U, Y, starts, shooting, bounds: dict) -> tuple[dict, dict]:
     sd = A = None
     for _ in range(MAX_RESTARTS + 1):      # stop at a tenth of the sandwich's sigma (above)
         try:
-            sd, A, n = window_covariance(g, U, Y, starts, shooting, names, sol.x, scale, lo, hi)
+            sd, A, n = window_covariance(g, U, Y, starts, sandwich or shooting, names, sol.x,
+                                         scale, lo, hi)
         except (ValueError, np.linalg.LinAlgError):
             sd = None
             break

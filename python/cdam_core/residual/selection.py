@@ -32,7 +32,7 @@ from cdam_core.models.greybox.freerun import free_run_error
 from cdam_core.residual.benchmark import greybox_of
 from cdam_core.residual.instrumental import iv_fit
 from cdam_core.residual.output_error import refined_fit
-from cdam_core.residual.validation import BlockedCV, paired
+from cdam_core.residual.validation import STATE_FIT_ITERATIONS, BlockedCV, paired
 
 
 @dataclass
@@ -442,7 +442,10 @@ def _estimate(best: str, current: Fit, sig, cv, trim: int) -> tuple[Fit, dict]:
     g = greybox_of(current, cv.dt)
     everything = np.ones(cv.Y.shape[0], bool)
     try:
-        info = (cv.refine if best == "oe" else cv.simulate_refine)(g, current, U, everything)
+        if best == "oe":     # the final estimate: each window's state fit iterated
+            info = cv.refine(g, current, U, everything, iterations=STATE_FIT_ITERATIONS)
+        else:
+            info = cv.simulate_refine(g, current, U, everything)
     except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
         return current, {"status": "unavailable", "reason": str(exc)}
     theta = {p: g.theta_[p] for p in current.estimated}
