@@ -32,7 +32,7 @@ from cdam_core.models.greybox.freerun import free_run_error
 from cdam_core.residual.benchmark import greybox_of
 from cdam_core.residual.instrumental import iv_fit
 from cdam_core.residual.output_error import refined_fit
-from cdam_core.residual.validation import STATE_FIT_ITERATIONS, BlockedCV, paired
+from cdam_core.residual.validation import BlockedCV, paired
 
 
 @dataclass
@@ -442,8 +442,8 @@ def _estimate(best: str, current: Fit, sig, cv, trim: int) -> tuple[Fit, dict]:
     g = greybox_of(current, cv.dt)
     everything = np.ones(cv.Y.shape[0], bool)
     try:
-        if best == "oe":     # the final estimate: each window's state fit iterated
-            info = cv.refine(g, current, U, everything, iterations=STATE_FIT_ITERATIONS)
+        if best == "oe":     # the final estimate: the windows' states estimated with it
+            info = cv.refine(g, current, U, everything, joint=True)
         else:
             info = cv.simulate_refine(g, current, U, everything)
     except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:

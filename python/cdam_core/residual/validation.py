@@ -32,7 +32,6 @@ information criterion: a structure is kept only when it predicts held-out data b
 from __future__ import annotations
 
 import copy
-import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -42,7 +41,8 @@ from cdam_core.models.greybox.augmented import INTEGRATORS
 from cdam_core.models.greybox.estimation import design, fit
 from cdam_core.residual.benchmark import greybox_of
 from cdam_core.residual.instrumental import iv_fit
-from cdam_core.residual.output_error import refine, runs, simulation_refine
+from cdam_core.residual.output_error import (covariance_at, joint_refine, refine, runs,
+                                             simulation_refine)
 
 __all__ = ["BlockedCV", "Comparison", "midpoint", "motion_horizon", "paired"]
 
@@ -81,20 +81,6 @@ WINDOW_INTEGRATOR = "rk4"
 # not move from its start under numpy's cut (Fv -8.6 %, Fc +20 %, held-out 6.8e-6) and
 # reaches the truth under this one (Fv +0.14 %, Fc -0.62 %, held-out 7.0e-8)
 STATE_FIT_RCOND = float(np.sqrt(np.finfo(float).eps))
-
-# the final output-error estimate's window states: Gauss-Newton iterated per window until the
-# error after a step is what its linearisation predicted (relative STATE_FIT_TOL; a step that
-# does not lower the window's error ends it), at most STATE_FIT_ITERATIONS simulations. One
-# linearised step (the decisions' windows) leaves each window's error above its minimum by the
-# linearisation's error, larger where the motion switches (a dry friction's sign): a smoother
-# model (dry friction traded for viscous) is then linearised better and scores lower than the
-# truth. Measured (session 11) on the README's joint (independent generator, seed 0): the
-# windows' mean error at the truth against the one-step estimate 7.88e-7 / 7.74e-7 after one
-# step, 6.21e-7 / 6.42e-7 after four; the estimate Fc -17 % / Dm +5.2 % -> Fc -0.01 % / Dm
-# +0.2 % (every parameter within 0.2 %). The tolerance is a numerical one (a thousandth of a
-# window's error); the cap only bounds the cost.
-STATE_FIT_TOL = 1e-3
-STATE_FIT_ITERATIONS = 4
 
 
 def midpoint(u) -> np.ndarray:
@@ -352,20 +338,30 @@ class BlockedCV:
         ok = np.array([mask[s:s + H + 1].all() for s in st], dtype=bool)
         return st[ok]
 
-    def refine(self, g, f, U, mask, iterations: int = 1) -> dict:
+    def refine(self, g, f, U, mask, joint: bool = False) -> dict:
         """Output-error refinement of GreyBox ``g`` (from IDIM fit ``f``) on the windows of
-        the rows in ``mask``; returns the refinement's report. ``iterations``: the windows'
-        state fit (:meth:`_shooting`; the final estimate's: :data:`STATE_FIT_ITERATIONS`)."""
+        the rows in ``mask``; returns the refinement's report. ``joint`` (the final
+        estimate's): then from that optimum the windows' states estimated with the parameters
+        (:func:`~cdam_core.residual.output_error.joint_refine`), the standard deviations the
+        sandwich's at that point."""
         bounds = dict(getattr(f.model, "bounds", {}) or {})
         for e in f.effects:
             bounds.update(e.bounds())
-        shooting = self._shooting if iterations <= 1 else \
-            functools.partial(self._shooting, iterations=int(iterations))
-        _, info = refine(g, U, self.Y, self.training_starts(mask), shooting, bounds,
-                         sandwich=self._shooting)
-        if iterations > 1:
-            info["state_fit"] = (f"Gauss-Newton per window, at most {int(iterations)} "
-                                 f"simulations, tolerance {STATE_FIT_TOL:g}")
+        starts = self.training_starts(mask)
+        _, info = refine(g, U, self.Y, starts, self._shooting, bounds)
+        if joint:
+            nested = {k: info[k] for k in ("window_rms_after", "evaluations")}
+            names = list(g.estimated_)
+            before = {p: g.theta_[p] for p in names}
+            try:
+                info = joint_refine(g, U, self.Y, starts, bounds, self.norm, self.horizon,
+                                    self.dt, self.integrator)
+                info["std"] = covariance_at(g, U, self.Y, starts, self._shooting, bounds)
+            except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
+                g.set_parameters(before)
+                info = {**info, "joint": {"status": "unavailable", "reason": str(exc)}}
+            else:
+                info["nested"] = nested
         return info
 
     def simulate_refine(self, g, f, U, mask) -> dict:
@@ -419,11 +415,9 @@ class BlockedCV:
         return np.array([float(np.mean(c)) for c in np.array_split(e, max(int(count), 1))])
 
     def _shooting(self, g, U, Y, starts, fit_state: bool = True, thetas=None,
-                  samples: bool = False, iterations: int = 1) -> np.ndarray:
+                  samples: bool = False) -> np.ndarray:
         """Per-window normalised squared error, each window's initial state fitted (linearised
-        least squares, one batched simulation with every state component perturbed; with
-        ``iterations`` > 1, Gauss-Newton repeated on the windows not yet converged, see
-        :data:`STATE_FIT_TOL`).
+        least squares, one batched simulation with every state component perturbed).
         ``thetas``: (G, parameters) values (``GreyBox.windows``): the G parameter sets are
         simulated in the same batch and a (G, windows) array is returned. ``samples``: each
         window's normalised residual after the state fit instead, (windows, H * outputs) (or
@@ -443,9 +437,6 @@ class BlockedCV:
             return out if thetas is not None else out[0]
         steps = 1e-6 * (1.0 + np.concatenate([np.max(np.abs(x0), axis=0),
                                                np.max(np.abs(v0), axis=0)]))
-        if int(iterations) > 1:
-            return self._iterated_state_fit(g, U, Y, starts, thetas, samples, steps,
-                                            int(iterations))
         dx = np.vstack([np.zeros((1, 2 * m)), np.diag(steps)])       # (1 + 2m, 2m)
         X0 = np.tile(np.concatenate([x0 + d[:m] for d in dx]), (G, 1))
         V0 = np.tile(np.concatenate([v0 + d[m:] for d in dx]), (G, 1))
@@ -467,47 +458,6 @@ class BlockedCV:
                 np.finfo(float).eps * max(A.shape[1:])
             res = b - A @ (np.linalg.pinv(A, rcond=rcond) @ b)
             out[j] = res[..., 0] if samples else np.sum(res[..., 0] ** 2, axis=1) / (H * m)
-        return out if thetas is not None else out[0]
-
-    def _gauss_newton_step(self, g, U, Y, st, x0, v0, th, steps) -> tuple:
-        """One linearised state fit on lanes ``st`` (one window each, from positions ``x0``
-        and velocities ``v0``; ``th``: each lane's parameters or None): (squared error per
-        lane, normalised residual (lanes, H m), state step (lanes, 2m), the squared error the
-        linearisation predicts after the step)."""
-        H, m, L = self.horizon, Y.shape[1], st.size
-        idx = st[None, :] + np.arange(1, H + 1)[:, None]
-        dx = np.vstack([np.zeros((1, 2 * m)), np.diag(steps)])
-        X0 = np.concatenate([x0 + d[:m] for d in dx])
-        V0 = np.concatenate([v0 + d[m:] for d in dx])
-        P = g.windows(U, Y, np.tile(st, 2 * m + 1), H, X0, V0, integrator=self.integrator,
-                      thetas=None if th is None else np.tile(th, (2 * m + 1, 1)))
-        P = P.reshape(H, 2 * m + 1, L, m)
-        scale = 1.0 / np.sqrt(self.norm)
-        r = np.transpose((Y[idx] - P[:, 0]) * scale, (1, 0, 2)).reshape(L, H * m)
-        S = (P[:, 1:] - P[:, :1]) * scale / steps[None, :, None, None]
-        A = np.transpose(S, (2, 0, 3, 1)).reshape(L, H * m, 2 * m)
-        d = (np.linalg.pinv(A, rcond=STATE_FIT_RCOND) @ r[..., None])[..., 0]
-        left = r - (A @ d[..., None])[..., 0]
-        return np.sum(r ** 2, axis=1), r, d, np.sum(left ** 2, axis=1)
-
-    def _iterated_state_fit(self, g, U, Y, starts, thetas, samples, steps, iterations):
-        """:meth:`_shooting` with each window's state refined by Gauss-Newton (module's
-        :data:`STATE_FIT_TOL`): every (parameter set, window) pair a lane with its own
-        parameters; a lane stops when its step's error is within the tolerance of the
-        linearised prediction or the step does not lower it (the step is then undone)."""
-        H, m, W = self.horizon, Y.shape[1], starts.size
-        G = 1 if thetas is None else int(np.shape(thetas)[0])
-        st = np.tile(starts, G)
-        th = None if thetas is None else np.repeat(np.asarray(thetas, dtype=float), W, axis=0)
-        x = Y[st].astype(float)
-        v = (Y[st] - Y[st - 1]) / self.dt
-        err, res, d, pred = self._gauss_newton_step(g, U, Y, st, x, v, th, steps)
-        for _ in range(iterations - 1):     # every lane the same steps; the best iterate kept
-            x, v = x + d[:, :m], v + d[:, m:]
-            e2, r2, d, _p = self._gauss_newton_step(g, U, Y, st, x, v, th, steps)
-            better = e2 < err
-            err, res = np.where(better, e2, err), np.where(better[:, None], r2, res)
-        out = res.reshape(G, W, H * m) if samples else (err / (H * m)).reshape(G, W)
         return out if thetas is not None else out[0]
 
     def compare(self, simple, rich, tested: int, alpha: float) -> Comparison:
