@@ -442,7 +442,10 @@ def _estimate(best: str, current: Fit, sig, cv, trim: int) -> tuple[Fit, dict]:
     g = greybox_of(current, cv.dt)
     everything = np.ones(cv.Y.shape[0], bool)
     try:
-        info = (cv.refine if best == "oe" else cv.simulate_refine)(g, current, U, everything)
+        if best == "oe":     # the final estimate: the windows' states estimated with it
+            info = cv.refine(g, current, U, everything, joint=True)
+        else:
+            info = cv.simulate_refine(g, current, U, everything)
     except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
         return current, {"status": "unavailable", "reason": str(exc)}
     theta = {p: g.theta_[p] for p in current.estimated}

@@ -41,7 +41,8 @@ from cdam_core.models.greybox.augmented import INTEGRATORS
 from cdam_core.models.greybox.estimation import design, fit
 from cdam_core.residual.benchmark import greybox_of
 from cdam_core.residual.instrumental import iv_fit
-from cdam_core.residual.output_error import refine, runs, simulation_refine
+from cdam_core.residual.output_error import (covariance_at, joint_refine, refine, runs,
+                                             simulation_refine)
 
 __all__ = ["BlockedCV", "Comparison", "midpoint", "motion_horizon", "paired"]
 
@@ -337,13 +338,30 @@ class BlockedCV:
         ok = np.array([mask[s:s + H + 1].all() for s in st], dtype=bool)
         return st[ok]
 
-    def refine(self, g, f, U, mask) -> dict:
+    def refine(self, g, f, U, mask, joint: bool = False) -> dict:
         """Output-error refinement of GreyBox ``g`` (from IDIM fit ``f``) on the windows of
-        the rows in ``mask``; returns the refinement's report."""
+        the rows in ``mask``; returns the refinement's report. ``joint`` (the final
+        estimate's): then from that optimum the windows' states estimated with the parameters
+        (:func:`~cdam_core.residual.output_error.joint_refine`), the standard deviations the
+        sandwich's at that point."""
         bounds = dict(getattr(f.model, "bounds", {}) or {})
         for e in f.effects:
             bounds.update(e.bounds())
-        _, info = refine(g, U, self.Y, self.training_starts(mask), self._shooting, bounds)
+        starts = self.training_starts(mask)
+        _, info = refine(g, U, self.Y, starts, self._shooting, bounds)
+        if joint:
+            nested = {k: info[k] for k in ("window_rms_after", "evaluations")}
+            names = list(g.estimated_)
+            before = {p: g.theta_[p] for p in names}
+            try:
+                info = joint_refine(g, U, self.Y, starts, bounds, self.norm, self.horizon,
+                                    self.dt, self.integrator)
+                info["std"] = covariance_at(g, U, self.Y, starts, self._shooting, bounds)
+            except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
+                g.set_parameters(before)
+                info = {**info, "joint": {"status": "unavailable", "reason": str(exc)}}
+            else:
+                info["nested"] = nested
         return info
 
     def simulate_refine(self, g, f, U, mask) -> dict:
