@@ -8,13 +8,18 @@ KeyboardInterrupt around everything it does (building the parser imports every c
 """
 from __future__ import annotations
 
+import os
 import signal
 import sys
 
 
 def _interrupted_at_start(signum, frame):
+    # exit here, not by an exception: raised inside an extension's import (numpy's C core
+    # importing ``datetime``) the exception becomes that module's ImportError and a traceback
+    # (seen in CI). Nothing has been written yet while the modules import.
     sys.stderr.write("cdam: error: interrupted\n")
-    raise SystemExit(130)
+    sys.stderr.flush()
+    os._exit(130)
 
 
 try:        # only the main thread may set handlers; elsewhere nothing to do
@@ -26,7 +31,6 @@ except ValueError:
 import argparse  # noqa: E402  (after the handler: a Ctrl-C while importing is one line)
 import importlib  # noqa: E402
 import importlib.util  # noqa: E402
-import os  # noqa: E402
 
 from cdam_core import __version__  # noqa: E402
 
