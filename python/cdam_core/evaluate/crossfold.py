@@ -271,6 +271,14 @@ ANCHORED_FIXED = {"epochs": 20, "net_features": "physics", "weighting": "base", 
 ANCHORED_BLIND = ("x", "y", "z")
 
 
+def _direct(direct, feat, H) -> ArxDirect:
+    """The direct predictor of ``direct`` (``AnchoredFitter``'s choice: orders, and step 1's
+    own regressors when chosen)."""
+    parts = (direct.get("first") or {}).get("parts") or None
+    return ArxDirect(direct["orders"], feat, H,
+                     first=None if parts is None else [tuple(p) for p in parts])
+
+
 def _records_stack(st: Stack, keep) -> Stack:
     """The rows of ``st`` whose record index is in ``keep`` (its segments whole)."""
     keep = set(int(k) for k in keep)
@@ -360,7 +368,8 @@ class AnchoredFitter:
     def __init__(self, grid=None, fixed=None, select_horizons=(1, 10, 25, 50),
                  arx_grid=ARX_GRID, groups=NANODRONE_GROUPS, blind=ANCHORED_BLIND,
                  anchor_features=("raw", "physics"), blend="validation", cache=None,
-                 blend_rule="worst", blend_design="flights", direct=False, gate="mean"):
+                 blend_rule="worst", blend_design="flights", direct=False, gate="mean",
+                 first_step=True):
         self.grid = dict(ANCHORED_GRID if grid is None else grid)
         self.fixed = dict(ANCHORED_FIXED if fixed is None else fixed)
         if not self.grid:
@@ -390,6 +399,7 @@ class AnchoredFitter:
         if gate not in ("none", *GATES):
             raise ValueError(f"gate: unknown {gate!r}; use none, {', '.join(GATES)}")
         self.gate = gate
+        self.first_step = bool(first_step)
         self.choices = []
 
     def _trained(self, params, stack, valid=None):
@@ -498,6 +508,8 @@ class AnchoredFitter:
         if chosen != "arx" and self.blend == "validation" and design == "types":
             if self.direct:
                 direct = self._direct_orders(feat, orders[2], fit, valid, H)
+                if self.first_step:
+                    direct["first"] = self._first_step(train, ref, direct, feat, labels)
             types = self._type_out(train, arxs, direct, feat, H, common, chosen,
                                    epochs[chosen], labels)
             flights_w = weights[chosen]
@@ -517,8 +529,8 @@ class AnchoredFitter:
                                                    "epochs": epochs[chosen]}, train)
             hist["final"] = model.history_
             if keep_direct:
-                final.append(ArxDirect(direct["orders"], feat, H).fit(
-                    train.U, train.Y, segments=train.lengths))
+                final.append(_direct(direct, feat, H).fit(train.U, train.Y,
+                                                          segments=train.lengths))
             net = model
             if w is not None:
                 model = KStepBlend(final + [net], weights=w, groups=labels)
@@ -586,6 +598,59 @@ class AnchoredFitter:
         return {"orders": list(best), "validation": {",".join(map(str, o)): v
                                                      for o, v in scores.items()}}
 
+    def _first_step(self, train, ref, direct, feat, labels) -> dict:
+        """Step 1's own regressors for the direct predictor (``ArxDirect(first=...)``), chosen
+        type out per group: for each training type held out in turn, every candidate of
+        ``arx_grid`` x ``anchor_features`` and the reference ARX fitted on the other types'
+        flights and scored one step ahead on that type's (the same rows: from the largest t0
+        of the candidates); a group's candidate is the least mean over the held-out types of
+        its RMSE relative to the reference's, the direct predictor's own step 1 (its orders and
+        features, a candidate) on ties; a group whose choice is the direct's own gets no entry.
+        Returns {"parts": [[outputs, orders, features]], "scores": {group: {candidate: mean
+        ratio}}, "chosen": {group: candidate}}."""
+        rtype, present = _train_types(train)
+        cands = [(f, tuple(int(v) for v in o)) for f in self.anchor_features
+                 for o in self.arx_grid]
+        own = (feat, tuple(int(v) for v in direct["orders"]))
+        if own not in cands:
+            cands.append(own)
+        lab = np.asarray(labels)
+        groups = list(np.unique(lab))
+        ratios = {c: [] for c in cands}
+        for held in present:
+            sub = _records_stack(train, np.flatnonzero(rtype != held))
+            out = _records_stack(train, np.flatnonzero(rtype == held))
+            fitted = {}
+            for c in [ref] + cands:
+                try:
+                    fitted[c] = ArxModel(c[1], c[0]).fit(sub.U, sub.Y, segments=sub.lengths)
+                except ValueError:       # features the inputs do not allow: no candidate
+                    continue
+            first = max(m.t0 for m in fitted.values())
+            sse = {}
+            for c, m in fitted.items():
+                E = []
+                for a, b in out.pieces():
+                    if b - a > first:
+                        P = m.predict(out.U[a:b], out.Y[a:b], mode="one_step")
+                        E.append(out.Y[a + first:b] - P[first:])
+                E = np.vstack(E)
+                sse[c] = np.array([np.sum(E[:, lab == g] ** 2) for g in groups])
+            for c in cands:
+                ratios[c].append(np.sqrt(sse[c] / sse[ref]) if c in sse else
+                                 np.full(len(groups), np.inf))
+        mean = {c: np.mean(r, axis=0) for c, r in ratios.items()}
+        parts, chosen, scores = [], {}, {}
+        for j, g in enumerate(groups):
+            best = min(cands, key=lambda c: (mean[c][j], c != own))
+            chosen[int(g)] = f"{best[0]} {','.join(map(str, best[1]))}"
+            scores[int(g)] = {f"{c[0]} {','.join(map(str, c[1]))}": float(mean[c][j])
+                              for c in cands}
+            if best != own:
+                parts.append([[int(i) for i in np.flatnonzero(lab == g)], list(best[1]),
+                              best[0]])
+        return {"parts": parts, "chosen": chosen, "scores": scores}
+
     def _type_out(self, train, arxs, direct, feat, H, common, chosen, n_epochs, labels):
         """The type-out design (class doc): per training type, the components fitted on the
         other types' training flights and that type's sums; the weights by the rule, with the
@@ -598,8 +663,7 @@ class AnchoredFitter:
             out = _records_stack(train, np.flatnonzero(rtype == held))
             comps = [ArxModel(o, f).fit(sub.U, sub.Y, segments=sub.lengths) for f, o in arxs]
             if direct is not None:
-                comps.append(ArxDirect(direct["orders"], feat, H).fit(
-                    sub.U, sub.Y, segments=sub.lengths))
+                comps.append(_direct(direct, feat, H).fit(sub.U, sub.Y, segments=sub.lengths))
             comps.append(self._trained({**common, **self.fixed, **self.grid[chosen],
                                         "epochs": n_epochs}, sub))
             G, b, c = KStepBlend(comps, groups=labels).sums(out.U, out.Y, out.lengths, H)

@@ -11,7 +11,15 @@ every input feature its k steps use), each step's (A_k, B_k, c_k) fitted by leas
 that step's error over every origin of the training segments whose target t + k lies in the
 segment (nothing crosses a seam). Step 1 is the ARX itself (``ArxModel``'s fit on the same rows).
 Steps beyond ``horizon`` and the free run continue with that ARX (iterated one-step
-prediction). Regressor channels are centred and scaled by their training mean and standard
+prediction).
+
+Step 1 may have regressors of its own (``first``): for each listed set of outputs, a one-step
+ARX (orders and features of their own, least squares on the same rows) predicts those outputs
+at step 1 in place of the ARX above. The ARX of ``narx`` chosen for the multi-step error need
+not be the best one-step predictor: on the nano-drone flights the one-step body rates are
+better predicted from the newest rotor speed (delay 1) than by the delay-2 ARX chosen for the
+multi-step error. Only step 1 changes: steps 2..``horizon`` are fitted from the measured rows
+and the recursion beyond continues from them, the free run is the ARX of ``narx``. Regressor channels are centred and scaled by their training mean and standard
 deviation before the normal equations are formed (conditioning; the fit is the same least
 squares). The sums are formed once: the Gram matrix of every origin's whole window and its
 cross products with every step's target, plus the origins near each segment's end whose window
@@ -33,13 +41,50 @@ class ArxDirect(ArxModel):
 
     kind = "arx_direct"
 
-    def __init__(self, narx=(2, 2, 1), features: str = "raw", horizon: int = 50):
+    def __init__(self, narx=(2, 2, 1), features: str = "raw", horizon: int = 50, first=None):
         self.horizon = horizon
+        self.first = first
         super().__init__(narx, features)
 
     def _check_params(self) -> None:
         super()._check_params()
         positive_int(self.horizon, "horizon")
+        self._first_parts()
+
+    def _first_parts(self):
+        """``first`` checked: a list of (outputs (indices), narx, features), the outputs of
+        different entries disjoint (None: step 1 is the ARX's)."""
+        if self.first is None:
+            return []
+        try:
+            items = list(self.first)
+        except TypeError:
+            raise ValueError("first: expected a list of (outputs, narx, features)") from None
+        parts, seen = [], set()
+        for j, item in enumerate(items):
+            if isinstance(item, dict):
+                item = (item.get("outputs"), item.get("narx"), item.get("features", "raw"))
+            try:
+                outs, narx, feat = item
+                outs = [int(o) for o in outs]
+            except (TypeError, ValueError):
+                raise ValueError(f"first[{j}]: expected (outputs, narx, features)") from None
+            if not outs or any(o < 0 for o in outs) or len(set(outs)) != len(outs):
+                raise ValueError(f"first[{j}]: outputs must be distinct indices >= 0")
+            if seen & set(outs):
+                raise ValueError(f"first[{j}]: outputs {sorted(seen & set(outs))} already "
+                                 f"listed")
+            seen |= set(outs)
+            ArxModel(narx, feat)                       # checks the orders and features
+            parts.append((outs, narx, feat))
+        return parts
+
+    @property
+    def t0(self) -> int:
+        t0 = self.orders.t0
+        for m in self.first_:
+            t0 = max(t0, m.t0)
+        return t0
 
     # -- regressors -------------------------------------------------------------------------
     def _window(self, U, Y, o, K):
@@ -68,7 +113,11 @@ class ArxDirect(ArxModel):
         nft = (K + nb - 1) * nf if nb else 0
         return np.r_[np.arange(ny), ny + np.arange(nfk), ny + nft]
 
+    first_: list = []              # the ``first`` outputs' ARXs (fitted), their outputs
+    first_outputs_: list = []
+
     def _fit(self, U, Y, bounds=None):
+        self.first_, self.first_outputs_ = [], []
         super()._fit(U, Y, bounds)                     # step 1, free run, sizes, feature scale
         K = int(self.horizon)
         F = self._features(U)
@@ -109,14 +158,35 @@ class ArxDirect(ArxModel):
                 raise ValueError("U, Y: values too large for a least-squares fit in float64")
             self.coefs_.append(np.linalg.lstsq(Gk, bk, rcond=None)[0])
         self.n_inputs_, self.n_outputs_ = U.shape[1], m
+        self.first_, self.first_outputs_ = [], []
+        for j, (outs, narx, feat) in enumerate(self._first_parts()):
+            if max(outs) >= m:
+                self.n_outputs_ = None
+                raise ValueError(f"first[{j}]: output {max(outs)} of {m}")
+            self.first_.append(ArxModel(narx, feat).fit(U, Y, segments=bounds))
+            self.first_outputs_.append(outs)
 
     # -- prediction -------------------------------------------------------------------------
+    def _one_step(self, U, Y):
+        """Step 1 (rows t0..): the ARX's, the outputs of ``first`` from their own ARXs."""
+        P = super()._one_step(U, Y)                   # rows t0.. (t0 covers every part)
+        for outs, m in zip(self.first_outputs_, self.first_):
+            P[:, outs] = m._one_step(U, Y)[self.t0 - m.t0:, outs]
+        return P
+
     def _rollout_step(self, k, origins, Ub, Zb, U, Y):
         """``Model.rollout``'s step k: steps 2..``horizon`` the direct predictions from the
         measured rows (which the ARX's recursion beyond continues from), else the ARX's
         one-step prediction."""
         if not 2 <= k <= int(self.horizon):
-            return super()._rollout_step(k, origins, Ub, Zb, U, Y)
+            P = super()._rollout_step(k, origins, Ub, Zb, U, Y)
+            if k == 1 and self.first_:
+                t0, W = self.t0, len(origins)
+                u = np.ascontiguousarray(Ub[:, :t0 + 1].reshape(W * (t0 + 1), -1))
+                z = np.ascontiguousarray(Zb[:, :t0 + 1].reshape(W * (t0 + 1), -1))
+                for outs, m in zip(self.first_outputs_, self.first_):
+                    P[:, outs] = m._windows_one_step(u, z, W, t0)[:, outs]
+            return P
         return self._window(U, Y, origins, k) @ self.coefs_[k - 2]   # step k's columns
 
     def _k_step(self, U, Y, k):
@@ -133,12 +203,30 @@ class ArxDirect(ArxModel):
         for name in ("y_mean_", "y_scale_", "f_mean_", "f_scale_"):
             d[name.rstrip("_")] = [float(v) for v in getattr(self, name)]
         d["steps"] = [[[float(v) for v in row] for row in c] for c in self.coefs_]
+        if self.first_:
+            d["first"] = [{"outputs": [int(o) for o in outs], "arx": m.to_dict()}
+                          for outs, m in zip(self.first_outputs_, self.first_)]
         return d
 
     @classmethod
     def from_dict(cls, d: dict) -> "ArxDirect":
-        m = cls(d["narx"], d["features"], d["horizon"])
+        first = d.get("first") or []
+        if not isinstance(first, list) or not all(isinstance(f, dict) and
+                                                  isinstance(f.get("arx"), dict)
+                                                  for f in first):
+            raise ValueError("model.first: expected a list of {outputs, arx}")
+        m = cls(d["narx"], d["features"], d["horizon"],
+                [(f["outputs"], f["arx"].get("narx"), f["arx"].get("features"))
+                 for f in first] or None)
         m._load_arx(d)
+        m.first_, m.first_outputs_ = [], []
+        for j, f in enumerate(first):
+            part = ArxModel.from_dict(f["arx"])
+            if (part.n_inputs_, part.n_outputs_) != (m.n_inputs_, m.n_outputs_) or \
+                    max(f["outputs"]) >= m.n_outputs_:
+                raise ValueError(f"model.first[{j}]: other inputs or outputs than the model")
+            m.first_.append(part)
+            m.first_outputs_.append([int(o) for o in f["outputs"]])
         mo, nf = m.n_outputs_, m.n_features
         for name, size in (("y_mean", mo), ("y_scale", mo), ("f_mean", nf), ("f_scale", nf)):
             setattr(m, name + "_", field_array(d[name], f"model.{name}", (size,)))
