@@ -347,7 +347,16 @@ class AnchoredFitter:
       weights by the rule on the other held-out types, the RMSE relative to the raw ARX on
       this one, mean over types, steps and groups) is lower with it than without; else it is
       left out. Measured on the 17 flights (docs/examples/nanodrone/anchored/): 0.907-0.936
-      with it against 0.966-0.993 without, kept in all four folds. The gate (session 10,
+      with it against 0.966-0.993 without, kept in all four folds. With ``first_step`` (default),
+      the direct predictor's step 1 has regressors of its own per group (``ArxDirect(first=
+      ...)``, ``_first_step``): for each group the one-step ARX of ``arx_grid`` x
+      ``anchor_features`` whose one-step RMSE relative to the raw ARX's is least on the mean
+      over the held-out training types (each fitted on the other types), the direct's own
+      step 1 on ties (no entry then); steps 2.. are unchanged. Why: the raw ARX's orders are
+      chosen for the multi-step error (delay 2 on the flights) and are not the best one-step
+      predictor; the body rates one step ahead are better predicted from the newest rotor
+      speed (delay 1) on three of the four trajectory types (session 11, rule fixed before
+      the test folds). The gate (session 10,
       ``models.kstep_blend.held_out_gate``): the weights of a step and group are the raw
       ARX's alone unless the held-out types prefer the blend there (the weights the rule
       chooses on the other held-out types have a lower error than the raw ARX's; ``gate``:
