@@ -53,6 +53,7 @@ from cdam_core.base.jsonio import write_json_atomic, write_text_atomic  # noqa: 
 from cdam_core.evaluate.crossfold import (ANCHORED_FIXED, ANCHORED_GRID,  # noqa: E402
                                           TYPES, AnchoredFitter, cross_trajectory_fold,
                                           mean_over_folds)
+from cdam_core.evaluate.groups import NANODRONE_GROUPS as ANCHORED_GROUPS  # noqa: E402
 from cdam_core.models.flight.hybrid import QuadHybrid  # noqa: E402
 from cdam_core.record.realdata.nanodrone import nanodrone_files  # noqa: E402
 
@@ -104,6 +105,11 @@ def _type_out_text(c) -> str:
     out = ""
     if c.get("direct"):
         out += f"; direct orders {tuple(c['direct']['orders'])}"
+        first = (c["direct"].get("first") or {}).get("chosen")
+        if first:
+            names = [g.name for g in ANCHORED_GROUPS]
+            out += "; its step 1 " + ", ".join(
+                f"{names[int(g)] if int(g) < len(names) else g} {v}" for g, v in first.items())
     t = c.get("type_out")
     if t and t.get("scores"):
         out += ("; type-out score with direct {with_direct:.4f}, without {without_direct:.4f}"
@@ -224,7 +230,10 @@ def _write(out, folds, choices, md, fixed) -> int:
             "its k-step residual (kind arx_kstep, structures " + json.dumps(ANCHORED_GRID)
             + " over " + json.dumps(fixed) + "; the epoch count: the validation "
             "flights' best), the direct multi-step predictor (kind arx_direct) where it lowers the "
-            "type-out score, convex weights per step and group chosen type out (each "
+            "type-out score (its step 1 with regressors of its own per group, chosen type out "
+            "among the ARX grid's one-step fits: AnchoredFitter first_step, session 11, rule "
+            "fixed before that session's test folds), convex weights per step and group chosen "
+            "type out (each "
             "training type held out in turn from the components' training: the 0.01-grid "
             "point of the simplex whose worst held-out type has the least error relative to "
             "the raw-input ARX's; rule and design fixed before session 9's test folds were "
