@@ -269,7 +269,7 @@ def test_anchored_fitter_type_out_design_and_the_direct_predictor():
     fitter = AnchoredFitter(grid={"small": {"hidden": 4, "lags": 1, "horizon": 10}},
                             fixed={"epochs": 8, "weighting": "base"},
                             arx_grid=((1, 1, 1), (2, 1, 1)), groups=(), blind=(),
-                            blend_design="types", direct=True)
+                            blend_design="types", direct=True, first_step=True)
     model = fitter(train, fit, valid)
     c = fitter.choices[-1]
     assert c["chosen"] == "small" and isinstance(model, KStepBlend)
@@ -280,6 +280,13 @@ def test_anchored_fitter_type_out_design_and_the_direct_predictor():
     assert t["keep_direct"] == (s["with_direct"] < s["without_direct"])
     kinds = [type(p) for p in model.components_]
     assert (ArxDirect in kinds) == t["keep_direct"]
+    # step 1's own regressors: the final direct predictor carries the type-out choice
+    first = c["direct"]["first"]
+    assert set(first["chosen"]) == {0, 1}
+    for p in model.components_:
+        if isinstance(p, ArxDirect):
+            assert [[o, list(m.orders), m.features] for o, m in
+                    zip(p.first_outputs_, p.first_)] == first["parts"]
     assert model.weights_.shape == (50, 2, len(model.components_))
     assert np.array_equal(model.weights_, np.asarray(c["blend_weights"]))
     # the gate: per step and group the ungated weights, or the raw ARX's alone where closed

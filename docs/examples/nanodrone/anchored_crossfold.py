@@ -146,6 +146,9 @@ def main(argv=None) -> int:
                     help="folder of trained networks (reused when parameters and data match)")
     ap.add_argument("--no-quad-hybrid", action="store_true",
                     help="leave the physics + network model (quad_hybrid) out")
+    ap.add_argument("--first-step", action="store_true",
+                    help="the direct predictor's step 1 with regressors of its own per group, "
+                         "chosen type out (AnchoredFitter first_step; off by default)")
     ap.add_argument("--merge", nargs="+", default=None,
                     help="join the folds.pkl of earlier runs' folders (no training)")
     args = ap.parse_args(argv)
@@ -169,7 +172,7 @@ def main(argv=None) -> int:
     fixed = dict(ANCHORED_FIXED, epochs=2) if args.quick else None
     hybrid_kw = dict(epochs=2) if args.quick else {}
     fitter = AnchoredFitter(fixed=fixed, cache=args.cache, blend_design="types",
-                            blend_rule="worst", direct=True)
+                            blend_rule="worst", direct=True, first_step=args.first_step)
 
     def quad_hybrid(train, fit, valid):
         dt = float(np.median(np.diff(train.t)))
@@ -210,6 +213,7 @@ def _write(out, folds, choices, md, fixed) -> int:
     """The mean over the folds, the page and results.json."""
     out.mkdir(parents=True, exist_ok=True)
     mean = mean_over_folds(folds)
+    first_on = any(((c.get("direct") or {}).get("first") or {}).get("chosen") for c in choices)
     extra = {}
     if PAPERNETS.exists() and len(folds) == len(TYPES):
         js = json.loads(PAPERNETS.read_text())["mean"]
@@ -230,10 +234,11 @@ def _write(out, folds, choices, md, fixed) -> int:
             "its k-step residual (kind arx_kstep, structures " + json.dumps(ANCHORED_GRID)
             + " over " + json.dumps(fixed) + "; the epoch count: the validation "
             "flights' best), the direct multi-step predictor (kind arx_direct) where it lowers the "
-            "type-out score (its step 1 with regressors of its own per group, chosen type out "
-            "among the ARX grid's one-step fits: AnchoredFitter first_step, session 11, rule "
-            "fixed before that session's test folds), convex weights per step and group chosen "
-            "type out (each "
+            "type-out score" + (" (its step 1 with regressors of its own per group, chosen "
+                                "type out among the ARX grid's one-step fits: --first-step, "
+                                "AnchoredFitter first_step, session 11, rule fixed before that "
+                                "session's test folds)" if first_on else "")
+            + ", convex weights per step and group chosen type out (each "
             "training type held out in turn from the components' training: the 0.01-grid "
             "point of the simplex whose worst held-out type has the least error relative to "
             "the raw-input ARX's; rule and design fixed before session 9's test folds were "
