@@ -17,13 +17,20 @@ Candidates (plain numpy regressors, the ARX's plus):
   rotor_acc   d omega_i / dt (yaw reaction torque): spanned by the lagged speeds, no change
   armax3/6    two-stage ARMAX: an AR(3) / AR(6) on the ARX's one-step residual
   ridge       delay1 with a ridge penalty lam * N on the standardised regressors
-About 20 s on one core.
+Last, per flight: the share of the rates' one-sample change w(t+1) - w(t) explained (R^2, least
+squares with w(t)) by the mixer's roll / pitch / yaw torque combinations of the rotor speeds
+at t - L, L = 0, 1, 2 samples: where the rotor speeds sit in time against the rates.
+About 25 s on one core.
 
 Measured (session 11; docs/examples/nanodrone/anchored_first_step/ has the table in words):
 the equation error is coloured (lag 2 -0.04..-0.16, lag 3 up to +0.34 on the yaw rate,
 2/sqrt(N) = 0.008); delay1 -4..-11 % on square, random2, multisine held out, +4.8..+9 % on
 random1 held out; no candidate lower on every held-out type of a fold except delay1 (and its
 ridge) in the fold whose test type is random1 and nb6 in the random2 fold (-0.1..-0.8 %).
+Per flight the best torque lag L is 0 on 7 flights, 1 on 8, 2 on 2 (random1: 1, 1, 2, 1;
+multisine runs 1-2: 0, runs 3-4: 1; square 2, 1, 0, 0, 1): the rotor speeds' alignment
+against the rates moves by 10-20 ms from flight to flight, within a type too, so no fixed
+input delay is the best one-step predictor on every flight.
 """
 import os
 
@@ -155,6 +162,26 @@ def main() -> int:
             print(f"  {name:12s} " + " / ".join(f"{100 * (v - 1):+6.2f} %" for v in r)
                   + f"   mean {100 * (r.mean() - 1):+6.2f} %"
                   + ("   (lower on every type)" if np.all(r < 1) else ""))
+    print("per flight: R^2 of w(t+1) - w(t) on the torque combinations at t - L (and w(t)), "
+          "L = 0 / 1 / 2")
+    for f in nanodrone_files(None):
+        ds = load_nanodrone(f)
+        U, Y = ds.select(ds.inputs), ds.select(ds.outputs)
+        r2 = []
+        for L in (0, 1, 2):
+            X, T = [], []
+            for a, b in ds.segments:
+                if b - a > 50:
+                    F = physics_features(np.asarray(U[a:b], float), np.full(4, 3000.0))[0][:, 5:]
+                    w = np.asarray(Y[a:b], float)[:, R]
+                    tt = np.arange(6, b - a - 1)
+                    X.append(np.c_[F[tt - L], w[tt], np.ones(len(tt))])
+                    T.append(w[tt + 1] - w[tt])
+            X, T = np.vstack(X), np.vstack(T)
+            E = T - X @ np.linalg.lstsq(X, T, rcond=None)[0]
+            r2.append(1 - np.sum(E ** 2) / np.sum((T - T.mean(0)) ** 2))
+        print(f"  {f.name:34s} " + " / ".join(f"{v:.3f}" for v in r2)
+              + f"   best L {int(np.argmax(r2))}")
     return 0
 
 
