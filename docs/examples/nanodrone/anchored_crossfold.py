@@ -146,9 +146,12 @@ def main(argv=None) -> int:
                     help="folder of trained networks (reused when parameters and data match)")
     ap.add_argument("--no-quad-hybrid", action="store_true",
                     help="leave the physics + network model (quad_hybrid) out")
-    ap.add_argument("--first-step", action="store_true",
+    ap.add_argument("--first-step", nargs="?", const="own", default=False,
+                    choices=("own", "mix"),
                     help="the direct predictor's step 1 with regressors of its own per group, "
-                         "chosen type out (AnchoredFitter first_step; off by default)")
+                         "chosen type out (own), or mixed row by row with the raw ARX's by "
+                         "their recent one-step errors (mix) (AnchoredFitter first_step; off "
+                         "by default)")
     ap.add_argument("--merge", nargs="+", default=None,
                     help="join the folds.pkl of earlier runs' folders (no training)")
     args = ap.parse_args(argv)

@@ -53,6 +53,10 @@ __all__ = ["Fold", "cross_trajectory_fold", "mean_over_folds", "physics_effects_
            "PHYSICS_VARIANTS", "TYPES"]
 
 TYPES = ("square", "random1", "random2", "multisine")
+#: rows of the one-step error history behind ``first_step="mix"`` (1 s at the flights' 100 Hz;
+#: measured on the training types of the four folds, type out: the held-out ratios move by
+#: under 0.1 % between 50 and 400 rows, benchmarks/nanodrone_rates_onestep.py)
+FIRST_MIX_WINDOW = 100
 
 
 @dataclass
@@ -275,8 +279,10 @@ def _direct(direct, feat, H) -> ArxDirect:
     """The direct predictor of ``direct`` (``AnchoredFitter``'s choice: orders, and step 1's
     own regressors when chosen)."""
     parts = (direct.get("first") or {}).get("parts") or None
+    mix = (direct.get("first") or {}).get("mix")
     return ArxDirect(direct["orders"], feat, H,
-                     first=None if parts is None else [tuple(p) for p in parts])
+                     first=None if parts is None else [tuple(p) for p in parts],
+                     first_mix=None if mix is None else tuple(mix))
 
 
 def _records_stack(st: Stack, keep) -> Stack:
@@ -415,7 +421,10 @@ class AnchoredFitter:
         if gate not in ("none", *GATES):
             raise ValueError(f"gate: unknown {gate!r}; use none, {', '.join(GATES)}")
         self.gate = gate
-        self.first_step = bool(first_step)
+        if first_step not in (False, True, "own", "mix"):
+            raise ValueError(f"first_step: unknown {first_step!r}; use False, 'own' (True) or "
+                             f"'mix'")
+        self.first_step = "own" if first_step is True else first_step
         self.choices = []
 
     def _trained(self, params, stack, valid=None):
@@ -526,6 +535,8 @@ class AnchoredFitter:
                 direct = self._direct_orders(feat, orders[2], fit, valid, H)
                 if self.first_step:
                     direct["first"] = self._first_step(train, ref, direct, feat, labels)
+                    if self.first_step == "mix" and direct["first"]["parts"]:
+                        direct["first"]["mix"] = [list(ref[1]), ref[0], FIRST_MIX_WINDOW]
             types = self._type_out(train, arxs, direct, feat, H, common, chosen,
                                    epochs[chosen], labels)
             flights_w = weights[chosen]
