@@ -213,3 +213,46 @@ def test_first_rejects_bad_entries(first, what):
     U, Y = _record3(5)
     with pytest.raises(ValueError, match=what):
         ArxDirect((2, 2, 1), horizon=3, first=first).fit(U, Y)
+
+
+def test_first_mix_weights_each_row_by_the_past_errors(tmp_path):
+    """``first_mix``: step 1 of the ``first`` outputs is lambda p1 + (1 - lambda) p2 per row,
+    lambda the least-squares weight (clipped to [0, 1]) of the two one-step predictors' errors
+    on the ``window`` rows before it in its segment: numpy loops written here; steps 2.. as
+    without it; the file keeps it."""
+    U1, Y1 = _record3(6)
+    U2, Y2 = _record3(7, 300)
+    U, Y, lengths = np.vstack([U1, U2]), np.vstack([Y1, Y2]), [400, 300]
+    W = 7
+    m = ArxDirect((2, 2, 2), "raw", horizon=4, first=[([1, 2], (1, 2, 1), "raw")],
+                  first_mix=((2, 2, 2), "raw", W)).fit(U, Y, segments=lengths)
+    plain = ArxDirect((2, 2, 2), "raw", horizon=4).fit(U, Y, segments=lengths)
+    at, p1 = _numpy_one_step(U, Y, lengths, (1, 2, 1), 3)
+    _, p2 = _numpy_one_step(U, Y, lengths, (2, 2, 2), 3)
+    want = p2.copy()
+    seg = np.repeat([0, 1], [397, 297])            # the rows t >= 3 of each segment
+    outs = [1, 2]
+    for i in range(len(at)):
+        past = [j for j in range(max(i - W, 0), i) if seg[j] == seg[i]]
+        e1 = Y[at[past]][:, outs] - p1[past][:, outs]
+        e2 = Y[at[past]][:, outs] - p2[past][:, outs]
+        den = np.sum((e1 - e2) ** 2)
+        lam = 0.0 if den == 0 else float(np.clip(np.sum((e2 - e1) * e2) / den, 0, 1))
+        want[i, outs] = lam * p1[i, outs] + (1 - lam) * p2[i, outs]
+    got = {k: (rows, P) for k, rows, P in m.rollout(U, Y, 4, segments=lengths)}
+    ref = {k: (rows, P) for k, rows, P in plain.rollout(U, Y, 4, segments=lengths)}
+    rows, P = got[1]
+    np.testing.assert_array_equal(rows, at)
+    np.testing.assert_allclose(P, want, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(m.predict(U, Y, segments=lengths)[rows], P, rtol=0, atol=1e-12)
+    for k in (2, 3, 4):
+        np.testing.assert_array_equal(got[k][1], ref[k][1])
+    from cdam_core.models.file import load_model, save_model
+    save_model(tmp_path / "m.json", m, inputs=["a", "b"], outputs=["p", "q", "r"])
+    back = load_model(tmp_path / "m.json")
+    np.testing.assert_array_equal(back.predict(U, Y, segments=lengths),
+                                  m.predict(U, Y, segments=lengths))
+    with pytest.raises(ValueError, match="first_mix"):
+        ArxDirect((2, 2, 1), first_mix=((1, 1, 1), "raw", 5))
+    with pytest.raises(ValueError, match="window"):
+        ArxDirect((2, 2, 1), first=[([0], (1, 1, 1), "raw")], first_mix=((1, 1, 1), "raw", 0))
