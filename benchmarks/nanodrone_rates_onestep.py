@@ -17,16 +17,20 @@ Candidates (plain numpy regressors, the ARX's plus):
   rotor_acc   d omega_i / dt (yaw reaction torque): spanned by the lagged speeds, no change
   armax3/6    two-stage ARMAX: an AR(3) / AR(6) on the ARX's one-step residual
   ridge       delay1 with a ridge penalty lam * N on the standardised regressors
+  mix W       delay1 and the ARX mixed row by row, lambda d1 + (1 - lambda) arx, lambda the
+              least-squares weight of their one-step errors over the W rows before (causal;
+              ArxDirect first_mix)
 Last, per flight: the share of the rates' one-sample change w(t+1) - w(t) explained (R^2, least
 squares with w(t)) by the mixer's roll / pitch / yaw torque combinations of the rotor speeds
 at t - L, L = 0, 1, 2 samples: where the rotor speeds sit in time against the rates.
-About 25 s on one core.
+About 30 s on one core.
 
 Measured (session 11; docs/examples/nanodrone/anchored_first_step/ has the table in words):
 the equation error is coloured (lag 2 -0.04..-0.16, lag 3 up to +0.34 on the yaw rate,
 2/sqrt(N) = 0.008); delay1 -4..-11 % on square, random2, multisine held out, +4.8..+9 % on
 random1 held out; no candidate lower on every held-out type of a fold except delay1 (and its
 ridge) in the fold whose test type is random1 and nb6 in the random2 fold (-0.1..-0.8 %).
+mix 100: -0.8..-10.5 % on every held-out type of every fold (50..400 rows within 0.15 %).
 Per flight the best torque lag L is 0 on 7 flights, 1 on 8, 2 on 2 (random1: 1, 1, 2, 1;
 multisine runs 1-2: 0, runs 3-4: 1; square 2, 1, 0, 0, 1): the rotor speeds' alignment
 against the rates moves by 10-20 ms from flight to flight, within a type too, so no fixed
@@ -114,6 +118,22 @@ def armax(train, test, c, p):
     return [T - X @ C]
 
 
+def mix(E1, E2, window):
+    """Errors of lambda p1 + (1 - lambda) p2 per segment, lambda from the past window's
+    errors E1, E2 of the two predictors (least squares, clipped to [0, 1])."""
+    out = []
+    for e1, e2 in zip(E1, E2):
+        d = e1 - e2
+        a = np.concatenate([[0.0], np.cumsum(np.sum(-d * e2, 1))])
+        q = np.concatenate([[0.0], np.cumsum(np.sum(d * d, 1))])
+        r = np.arange(len(e1))
+        lo = np.maximum(r - window, 0)
+        A, B = a[r] - a[lo], q[r] - q[lo]
+        lam = np.clip(np.divide(A, B, out=np.zeros_like(A), where=B > 0), 0, 1)[:, None]
+        out.append(lam * e1 + (1 - lam) * e2)
+    return out
+
+
 def rmse(E):
     E = np.vstack(E)
     return float(np.sqrt(np.mean(np.sum(E ** 2, axis=1))))
@@ -153,6 +173,10 @@ def main() -> int:
             for p in (3, 6):
                 rows.setdefault(f"armax{p}", []).append(
                     rmse(armax(train, segs[V], {"orders": o}, p)) / base)
+            E1 = residuals(train, segs[V], cands["delay1"])
+            E2 = residuals(train, segs[V], {"orders": o})
+            for w in (50, 100, 200, 400):
+                rows.setdefault(f"mix {w}", []).append(rmse(mix(E1, E2, w)) / base)
             for lam in (1e-4, 1e-3, 1e-2):
                 rows.setdefault(f"ridge {lam:g}", []).append(
                     rmse(residuals(train, segs[V], cands["delay1"], lam)) / base)

@@ -55,7 +55,7 @@ __all__ = ["Fold", "cross_trajectory_fold", "mean_over_folds", "physics_effects_
 TYPES = ("square", "random1", "random2", "multisine")
 #: rows of the one-step error history behind ``first_step="mix"`` (1 s at the flights' 100 Hz;
 #: measured on the training types of the four folds, type out: the held-out ratios move by
-#: under 0.1 % between 50 and 400 rows, benchmarks/nanodrone_rates_onestep.py)
+#: under 0.15 % between 50 and 400 rows, benchmarks/nanodrone_rates_onestep.py)
 FIRST_MIX_WINDOW = 100
 
 
