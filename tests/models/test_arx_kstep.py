@@ -269,7 +269,7 @@ def test_anchored_fitter_type_out_design_and_the_direct_predictor():
     fitter = AnchoredFitter(grid={"small": {"hidden": 4, "lags": 1, "horizon": 10}},
                             fixed={"epochs": 8, "weighting": "base"},
                             arx_grid=((1, 1, 1), (2, 1, 1)), groups=(), blind=(),
-                            blend_design="types", direct=True, first_step=True)
+                            blend_design="types", direct=True)
     model = fitter(train, fit, valid)
     c = fitter.choices[-1]
     assert c["chosen"] == "small" and isinstance(model, KStepBlend)
@@ -287,6 +287,10 @@ def test_anchored_fitter_type_out_design_and_the_direct_predictor():
         if isinstance(p, ArxDirect):
             assert [[o, list(m.orders), m.features] for o, m in
                     zip(p.first_outputs_, p.first_)] == first["parts"]
+            # the default (mix): mixed with the raw ARX where a group has a step 1 of its own
+            assert (p.mix_ is not None) == bool(first["parts"])
+            if first["parts"]:
+                assert list(p.mix_.orders) == list(model.components_[0].orders)
     assert model.weights_.shape == (50, 2, len(model.components_))
     assert np.array_equal(model.weights_, np.asarray(c["blend_weights"]))
     # the gate: per step and group the ungated weights, or the raw ARX's alone where closed

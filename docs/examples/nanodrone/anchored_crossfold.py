@@ -146,12 +146,11 @@ def main(argv=None) -> int:
                     help="folder of trained networks (reused when parameters and data match)")
     ap.add_argument("--no-quad-hybrid", action="store_true",
                     help="leave the physics + network model (quad_hybrid) out")
-    ap.add_argument("--first-step", nargs="?", const="own", default=False,
-                    choices=("own", "mix"),
-                    help="the direct predictor's step 1 with regressors of its own per group, "
-                         "chosen type out (own), or mixed row by row with the raw ARX's by "
-                         "their recent one-step errors (mix) (AnchoredFitter first_step; off "
-                         "by default)")
+    ap.add_argument("--first-step", default="mix", choices=("none", "own", "mix"),
+                    help="the direct predictor's step 1: with regressors of its own per group "
+                         "chosen type out (own), that mixed row by row with the raw ARX's by "
+                         "their recent one-step errors (mix, the default: AnchoredFitter's), or "
+                         "the direct's own (none, session 10's model)")
     ap.add_argument("--merge", nargs="+", default=None,
                     help="join the folds.pkl of earlier runs' folders (no training)")
     args = ap.parse_args(argv)
@@ -175,7 +174,7 @@ def main(argv=None) -> int:
     fixed = dict(ANCHORED_FIXED, epochs=2) if args.quick else None
     hybrid_kw = dict(epochs=2) if args.quick else {}
     fitter = AnchoredFitter(fixed=fixed, cache=args.cache, blend_design="types",
-                            blend_rule="worst", direct=True, first_step=args.first_step)
+                            blend_rule="worst", direct=True, first_step=False if args.first_step == "none" else args.first_step)
 
     def quad_hybrid(train, fit, valid):
         dt = float(np.median(np.diff(train.t)))
@@ -240,7 +239,9 @@ def _write(out, folds, choices, md, fixed) -> int:
             "type-out score" + (" (its step 1 with regressors of its own per group, chosen "
                                 "type out among the ARX grid's one-step fits: --first-step, "
                                 "AnchoredFitter first_step, session 11, rule fixed before that "
-                                "session's test folds)" if first_on else "")
+                                "session's test folds; with --first-step mix, the default, mixed "
+                                "row by row with the raw ARX's by their one-step errors over the "
+                                "100 rows before)" if first_on else "")
             + ", convex weights per step and group chosen type out (each "
             "training type held out in turn from the components' training: the 0.01-grid "
             "point of the simplex whose worst held-out type has the least error relative to "

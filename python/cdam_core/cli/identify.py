@@ -406,7 +406,9 @@ def _anchored(args, train, read) -> int:
         if first.get("chosen"):
             print("  its step 1 chosen type out per group (least mean one-step RMSE over the "
                   "raw ARX's): " + ", ".join(
-                      f"{_group_name(groups, g)} {v}" for g, v in first["chosen"].items()))
+                      f"{_group_name(groups, g)} {v}" for g, v in first["chosen"].items())
+                  + (f"; mixed row by row with the raw ARX's by their one-step errors over "
+                     f"the {first['mix'][2]} rows before" if first.get("mix") else ""))
     if c.get("blend_weights") is not None:
         where = "type out over " + ", ".join(c["type_out"]["types"]) if c.get("type_out") \
             else "on validation"

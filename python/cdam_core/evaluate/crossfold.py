@@ -353,8 +353,8 @@ class AnchoredFitter:
       weights by the rule on the other held-out types, the RMSE relative to the raw ARX on
       this one, mean over types, steps and groups) is lower with it than without; else it is
       left out. Measured on the 17 flights (docs/examples/nanodrone/anchored/): 0.907-0.936
-      with it against 0.966-0.993 without, kept in all four folds. With ``first_step`` (off by
-      default: measured, it did not hold on the test types; below),
+      with it against 0.966-0.993 without, kept in all four folds. With ``first_step="own"``
+      (measured, it did not hold on the test types; below),
       the direct predictor's step 1 has regressors of its own per group (``ArxDirect(first=
       ...)``, ``_first_step``): for each group the one-step ARX of ``arx_grid`` x
       ``anchor_features`` whose one-step RMSE relative to the raw ARX's is least on the mean
@@ -369,7 +369,16 @@ class AnchoredFitter:
       where random1 is the test type all three held-out types preferred it, the gate opened
       and the test type lost 5.5 %); mean over the four folds at rates h = 1 +0.82 % against
       the ARX (without it +0.011 %), while position, velocity and attitude at h = 1 gained
-      (-2.0, -1.1, -1.0 % against the ARX; without it -1.6, -1.1, -0.9 %); steps 2.. equal. The gate (session 10,
+      (-2.0, -1.1, -1.0 % against the ARX; without it -1.6, -1.1, -0.9 %); steps 2.. equal.
+      ``first_step="mix"`` (the default since session 11): that step 1 mixed row by row with
+      the raw ARX's (``ArxDirect(first_mix=...)``, ``FIRST_MIX_WINDOW`` rows of past one-step
+      errors): the rotor speeds' alignment against the rates moves by 10-20 ms between
+      flights, and the mix follows each flight's own. Type out inside the training types it
+      was lower than the raw ARX on every held-out type of every fold (rates -0.8 to -10.5 %);
+      rule fixed before its test folds (docs/examples/nanodrone/anchored/): rates at h = 1
+      -4.7 % against the ARX on the mean of the four folds (per fold -4.8 / -0.6 / -5.5 /
+      -6.9 %), below the ARX at 50 / 50 / 50 / 50 horizons on the mean. ``False``: session
+      10's model. The gate (session 10,
       ``models.kstep_blend.held_out_gate``): the weights of a step and group are the raw
       ARX's alone unless the held-out types prefer the blend there (the weights the rule
       chooses on the other held-out types have a lower error than the raw ARX's; ``gate``:
@@ -391,7 +400,7 @@ class AnchoredFitter:
                  arx_grid=ARX_GRID, groups=NANODRONE_GROUPS, blind=ANCHORED_BLIND,
                  anchor_features=("raw", "physics"), blend="validation", cache=None,
                  blend_rule="worst", blend_design="flights", direct=False, gate="mean",
-                 first_step=False):
+                 first_step="mix"):
         self.grid = dict(ANCHORED_GRID if grid is None else grid)
         self.fixed = dict(ANCHORED_FIXED if fixed is None else fixed)
         if not self.grid:
@@ -421,10 +430,10 @@ class AnchoredFitter:
         if gate not in ("none", *GATES):
             raise ValueError(f"gate: unknown {gate!r}; use none, {', '.join(GATES)}")
         self.gate = gate
-        if first_step not in (False, True, "own", "mix"):
+        if first_step not in (False, None, True, "own", "mix"):
             raise ValueError(f"first_step: unknown {first_step!r}; use False, 'own' (True) or "
                              f"'mix'")
-        self.first_step = "own" if first_step is True else first_step
+        self.first_step = "own" if first_step is True else (first_step or False)
         self.choices = []
 
     def _trained(self, params, stack, valid=None):
