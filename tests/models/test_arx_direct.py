@@ -122,3 +122,137 @@ def test_one_step_on_physics_features_is_the_least_squares_fit():
     origins, want = _numpy_direct(F, Y, lengths, orders, 1)
     np.testing.assert_array_equal(rows, origins + 1)
     np.testing.assert_allclose(P, want, rtol=0, atol=1e-8 * np.abs(want).max())
+
+
+def _record3(seed, n=400):
+    """Three outputs, the third driven by the newest input (delay 1), the others by older
+    ones (independent of the model code)."""
+    rng = np.random.default_rng(seed)
+    U = rng.normal(size=(n, 2))
+    Y = np.zeros((n, 3))
+    for t in range(3, n):
+        Y[t, 0] = 0.6 * Y[t - 1, 0] + 0.4 * U[t - 2, 0]
+        Y[t, 1] = 0.5 * Y[t - 1, 1] - 0.2 * Y[t - 2, 0] + 0.3 * U[t - 3, 1]
+        Y[t, 2] = 0.7 * Y[t - 1, 2] + 0.5 * U[t - 1, 1] + 0.2 * U[t - 1, 0] ** 2
+    return U, Y + 0.02 * rng.normal(size=Y.shape)
+
+
+def _numpy_one_step(U, Y, lengths, orders, t0):
+    """One-step predictions of the rows t >= t0 of each segment by np.linalg.lstsq on the ARX
+    regressors [y(t-1..t-na), u(t-nk..t-nk-nb+1), 1] of (na, nb, nk), fitted on the rows
+    t >= the orders' own t0."""
+    na, nb, nk = orders
+    own = max(na, nk + nb - 1)
+
+    def design(first):
+        rows, targets, at = [], [], []
+        a = 0
+        for n in lengths:
+            for t in range(a + first, a + n):
+                rows.append(np.concatenate([Y[t - j] for j in range(1, na + 1)]
+                                           + [U[t - nk - j] for j in range(nb)] + [[1.0]]))
+                targets.append(Y[t])
+                at.append(t)
+            a += n
+        return np.array(rows), np.array(targets), np.array(at)
+
+    X, T, _ = design(own)
+    coef = np.linalg.lstsq(X, T, rcond=None)[0]
+    X, _, at = design(t0)
+    return at, X @ coef
+
+
+def test_first_step_regressors_of_their_own(tmp_path):
+    """``first``: the listed outputs' step 1 is the one-step least squares of their own orders
+    (numpy), the others' the ARX's; steps 2.. equal the direct predictor without it (the same
+    numbers), the free run the ARX's; the model file keeps it."""
+    from cdam_core.models.file import load_model, save_model
+
+    U1, Y1 = _record3(3)
+    U2, Y2 = _record3(4, 300)
+    U, Y, lengths = np.vstack([U1, U2]), np.vstack([Y1, Y2]), [400, 300]
+    H = 6
+    plain = ArxDirect((2, 2, 2), "raw", horizon=H).fit(U, Y, segments=lengths)
+    m = ArxDirect((2, 2, 2), "raw", horizon=H, first=[([2], (1, 2, 1), "raw")]).fit(
+        U, Y, segments=lengths)
+    assert m.t0 == 3
+    got = {k: (rows, P) for k, rows, P in m.rollout(U, Y, H + 2, segments=lengths)}
+    ref = {k: (rows, P) for k, rows, P in plain.rollout(U, Y, H + 2, segments=lengths)}
+    at, want2 = _numpy_one_step(U, Y, lengths, (1, 2, 1), 3)
+    _, want01 = _numpy_one_step(U, Y, lengths, (2, 2, 2), 3)
+    rows, P = got[1]
+    np.testing.assert_array_equal(rows, at)
+    np.testing.assert_allclose(P[:, 2], want2[:, 2], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(P[:, :2], want01[:, :2], rtol=0, atol=1e-9)
+    # the newest input predicts output 2 better one step ahead than the delay-2 ARX
+    e_new = np.sqrt(np.mean((Y[at, 2] - want2[:, 2]) ** 2))
+    e_arx = np.sqrt(np.mean((Y[at, 2] - want01[:, 2]) ** 2))
+    assert e_new < 0.7 * e_arx
+    for k in range(2, H + 3):
+        np.testing.assert_array_equal(got[k][0], ref[k][0])
+        np.testing.assert_array_equal(got[k][1], ref[k][1])
+    # predict's one-step and k-step (k = 1) modes give the same step 1
+    for mode in ("one_step", "k_step"):
+        np.testing.assert_allclose(m.predict(U, Y, mode=mode, k=1, segments=lengths)[rows], P,
+                                   rtol=0, atol=1e-12)
+    np.testing.assert_allclose(m.predict(U, Y, mode="free_run", segments=lengths)[3:400],
+                               plain.predict(U, Y, mode="free_run", segments=lengths)[3:400],
+                               rtol=0, atol=1e-9)
+    save_model(tmp_path / "m.json", m, inputs=["a", "b"], outputs=["p", "q", "r"])
+    back = load_model(tmp_path / "m.json")
+    np.testing.assert_array_equal(back.predict(U, Y, segments=lengths),
+                                  m.predict(U, Y, segments=lengths))
+
+
+@pytest.mark.parametrize("first, what", [([([3], (1, 1, 1), "raw")], "output 3 of 3"),
+                                         ([([0], (1, 1, 1), "raw"), ([0], (2, 1, 1), "raw")],
+                                          "already listed"),
+                                         ([([0], (1, 1, 1), "cubic")], "features"),
+                                         (5, "expected a list")])
+def test_first_rejects_bad_entries(first, what):
+    U, Y = _record3(5)
+    with pytest.raises(ValueError, match=what):
+        ArxDirect((2, 2, 1), horizon=3, first=first).fit(U, Y)
+
+
+def test_first_mix_weights_each_row_by_the_past_errors(tmp_path):
+    """``first_mix``: step 1 of the ``first`` outputs is lambda p1 + (1 - lambda) p2 per row,
+    lambda the least-squares weight (clipped to [0, 1]) of the two one-step predictors' errors
+    on the ``window`` rows before it in its segment: numpy loops written here; steps 2.. as
+    without it; the file keeps it."""
+    U1, Y1 = _record3(6)
+    U2, Y2 = _record3(7, 300)
+    U, Y, lengths = np.vstack([U1, U2]), np.vstack([Y1, Y2]), [400, 300]
+    W = 7
+    m = ArxDirect((2, 2, 2), "raw", horizon=4, first=[([1, 2], (1, 2, 1), "raw")],
+                  first_mix=((2, 2, 2), "raw", W)).fit(U, Y, segments=lengths)
+    plain = ArxDirect((2, 2, 2), "raw", horizon=4).fit(U, Y, segments=lengths)
+    at, p1 = _numpy_one_step(U, Y, lengths, (1, 2, 1), 3)
+    _, p2 = _numpy_one_step(U, Y, lengths, (2, 2, 2), 3)
+    want = p2.copy()
+    seg = np.repeat([0, 1], [397, 297])            # the rows t >= 3 of each segment
+    outs = [1, 2]
+    for i in range(len(at)):
+        past = [j for j in range(max(i - W, 0), i) if seg[j] == seg[i]]
+        e1 = Y[at[past]][:, outs] - p1[past][:, outs]
+        e2 = Y[at[past]][:, outs] - p2[past][:, outs]
+        den = np.sum((e1 - e2) ** 2)
+        lam = 0.0 if den == 0 else float(np.clip(np.sum((e2 - e1) * e2) / den, 0, 1))
+        want[i, outs] = lam * p1[i, outs] + (1 - lam) * p2[i, outs]
+    got = {k: (rows, P) for k, rows, P in m.rollout(U, Y, 4, segments=lengths)}
+    ref = {k: (rows, P) for k, rows, P in plain.rollout(U, Y, 4, segments=lengths)}
+    rows, P = got[1]
+    np.testing.assert_array_equal(rows, at)
+    np.testing.assert_allclose(P, want, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(m.predict(U, Y, segments=lengths)[rows], P, rtol=0, atol=1e-12)
+    for k in (2, 3, 4):
+        np.testing.assert_array_equal(got[k][1], ref[k][1])
+    from cdam_core.models.file import load_model, save_model
+    save_model(tmp_path / "m.json", m, inputs=["a", "b"], outputs=["p", "q", "r"])
+    back = load_model(tmp_path / "m.json")
+    np.testing.assert_array_equal(back.predict(U, Y, segments=lengths),
+                                  m.predict(U, Y, segments=lengths))
+    with pytest.raises(ValueError, match="first_mix"):
+        ArxDirect((2, 2, 1), first_mix=((1, 1, 1), "raw", 5))
+    with pytest.raises(ValueError, match="window"):
+        ArxDirect((2, 2, 1), first=[([0], (1, 1, 1), "raw")], first_mix=((1, 1, 1), "raw", 0))

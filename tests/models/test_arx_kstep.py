@@ -280,6 +280,17 @@ def test_anchored_fitter_type_out_design_and_the_direct_predictor():
     assert t["keep_direct"] == (s["with_direct"] < s["without_direct"])
     kinds = [type(p) for p in model.components_]
     assert (ArxDirect in kinds) == t["keep_direct"]
+    # step 1's own regressors: the final direct predictor carries the type-out choice
+    first = c["direct"]["first"]
+    assert set(first["chosen"]) == {0, 1}
+    for p in model.components_:
+        if isinstance(p, ArxDirect):
+            assert [[o, list(m.orders), m.features] for o, m in
+                    zip(p.first_outputs_, p.first_)] == first["parts"]
+            # the default (mix): mixed with the raw ARX where a group has a step 1 of its own
+            assert (p.mix_ is not None) == bool(first["parts"])
+            if first["parts"]:
+                assert list(p.mix_.orders) == list(model.components_[0].orders)
     assert model.weights_.shape == (50, 2, len(model.components_))
     assert np.array_equal(model.weights_, np.asarray(c["blend_weights"]))
     # the gate: per step and group the ungated weights, or the raw ARX's alone where closed
@@ -315,3 +326,54 @@ def test_anchored_fitter_type_out_design_and_the_direct_predictor():
     assert (a["blend_design"], a["blend_design_asked"], a["type_out"], a["direct"]) == \
         ("flights", "auto", None, None)
     assert ArxDirect not in [type(p) for p in getattr(m, "components_", [m])]
+
+
+def _delays(n, seed):
+    """y0 driven by u0 one sample back, y1 by u1 two samples back (an ARX of each), noise."""
+    rng, U = _inputs(n, seed)
+    Y = np.zeros((n, 2))
+    for t in range(2, n):
+        Y[t] = [0.8 * Y[t - 1, 0] + 0.5 * U[t - 1, 0], 0.7 * Y[t - 1, 1] + 0.4 * U[t - 2, 1]]
+    return U, Y + 0.01 * rng.normal(size=Y.shape)
+
+
+def test_first_step_chosen_type_out_per_group():
+    """``AnchoredFitter._first_step``: per group (here each output), the candidate of least
+    mean held-out one-step RMSE ratio to the reference ARX; its scores equal numpy least
+    squares written here (fit on the other types' records, rows t >= 2 of the held-out
+    type's); the newest input wins for y0, the direct's own delay-2 step for y1 (no entry)."""
+    from cdam_core.evaluate.crossfold import AnchoredFitter
+    parts = [_delays(600, s) for s in (41, 42, 43, 44, 45, 46)]
+    train = _stack(parts)
+    train.names = ["a_1", "a_2", "b_1", "b_2", "c_1", "c_2"]
+    fitter = AnchoredFitter(arx_grid=((1, 1, 1), (1, 1, 2)), anchor_features=("raw",),
+                            groups=(), blind=(), blend_design="types", direct=True)
+    ref = ("raw", (1, 1, 2))
+    got = fitter._first_step(train, ref, {"orders": [1, 1, 2]}, "raw", [0, 1])
+
+    def one_step(fit_parts, held_parts, nk):
+        X, T = [], []
+        for u, y in fit_parts:
+            for t in range(max(1, nk), len(y)):
+                X.append([y[t - 1, 0], y[t - 1, 1], u[t - nk, 0], u[t - nk, 1], 1.0])
+                T.append(y[t])
+        coef = np.linalg.lstsq(np.array(X), np.array(T), rcond=None)[0]
+        sse = np.zeros(2)
+        for u, y in held_parts:
+            R = np.array([[y[t - 1, 0], y[t - 1, 1], u[t - nk, 0], u[t - nk, 1], 1.0]
+                          for t in range(2, len(y))])
+            sse += np.sum((y[2:] - R @ coef) ** 2, axis=0)
+        return sse
+
+    ratios = []
+    for held in range(3):
+        out = parts[2 * held:2 * held + 2]
+        rest = [p for k, p in enumerate(parts) if k // 2 != held]
+        ratios.append(np.sqrt(one_step(rest, out, 1) / one_step(rest, out, 2)))
+    mean = np.mean(ratios, axis=0)
+    for g in (0, 1):
+        assert got["scores"][g]["raw 1,1,1"] == pytest.approx(mean[g], rel=1e-9)
+        assert got["scores"][g]["raw 1,1,2"] == pytest.approx(1.0, rel=1e-12)
+    assert mean[0] < 0.9 and mean[1] > 1.0
+    assert got["chosen"] == {0: "raw 1,1,1", 1: "raw 1,1,2"}
+    assert got["parts"] == [[[0], [1, 1, 1], "raw"]]

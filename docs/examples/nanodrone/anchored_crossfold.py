@@ -53,6 +53,7 @@ from cdam_core.base.jsonio import write_json_atomic, write_text_atomic  # noqa: 
 from cdam_core.evaluate.crossfold import (ANCHORED_FIXED, ANCHORED_GRID,  # noqa: E402
                                           TYPES, AnchoredFitter, cross_trajectory_fold,
                                           mean_over_folds)
+from cdam_core.evaluate.groups import NANODRONE_GROUPS as ANCHORED_GROUPS  # noqa: E402
 from cdam_core.models.flight.hybrid import QuadHybrid  # noqa: E402
 from cdam_core.record.realdata.nanodrone import nanodrone_files  # noqa: E402
 
@@ -104,6 +105,11 @@ def _type_out_text(c) -> str:
     out = ""
     if c.get("direct"):
         out += f"; direct orders {tuple(c['direct']['orders'])}"
+        first = (c["direct"].get("first") or {}).get("chosen")
+        if first:
+            names = [g.name for g in ANCHORED_GROUPS]
+            out += "; its step 1 " + ", ".join(
+                f"{names[int(g)] if int(g) < len(names) else g} {v}" for g, v in first.items())
     t = c.get("type_out")
     if t and t.get("scores"):
         out += ("; type-out score with direct {with_direct:.4f}, without {without_direct:.4f}"
@@ -140,6 +146,11 @@ def main(argv=None) -> int:
                     help="folder of trained networks (reused when parameters and data match)")
     ap.add_argument("--no-quad-hybrid", action="store_true",
                     help="leave the physics + network model (quad_hybrid) out")
+    ap.add_argument("--first-step", default="mix", choices=("none", "own", "mix"),
+                    help="the direct predictor's step 1: with regressors of its own per group "
+                         "chosen type out (own), that mixed row by row with the raw ARX's by "
+                         "their recent one-step errors (mix, the default: AnchoredFitter's), or "
+                         "the direct's own (none, session 10's model)")
     ap.add_argument("--merge", nargs="+", default=None,
                     help="join the folds.pkl of earlier runs' folders (no training)")
     args = ap.parse_args(argv)
@@ -163,7 +174,7 @@ def main(argv=None) -> int:
     fixed = dict(ANCHORED_FIXED, epochs=2) if args.quick else None
     hybrid_kw = dict(epochs=2) if args.quick else {}
     fitter = AnchoredFitter(fixed=fixed, cache=args.cache, blend_design="types",
-                            blend_rule="worst", direct=True)
+                            blend_rule="worst", direct=True, first_step=False if args.first_step == "none" else args.first_step)
 
     def quad_hybrid(train, fit, valid):
         dt = float(np.median(np.diff(train.t)))
@@ -204,6 +215,7 @@ def _write(out, folds, choices, md, fixed) -> int:
     """The mean over the folds, the page and results.json."""
     out.mkdir(parents=True, exist_ok=True)
     mean = mean_over_folds(folds)
+    first_on = any(((c.get("direct") or {}).get("first") or {}).get("chosen") for c in choices)
     extra = {}
     if PAPERNETS.exists() and len(folds) == len(TYPES):
         js = json.loads(PAPERNETS.read_text())["mean"]
@@ -224,7 +236,13 @@ def _write(out, folds, choices, md, fixed) -> int:
             "its k-step residual (kind arx_kstep, structures " + json.dumps(ANCHORED_GRID)
             + " over " + json.dumps(fixed) + "; the epoch count: the validation "
             "flights' best), the direct multi-step predictor (kind arx_direct) where it lowers the "
-            "type-out score, convex weights per step and group chosen type out (each "
+            "type-out score" + (" (its step 1 with regressors of its own per group, chosen "
+                                "type out among the ARX grid's one-step fits: --first-step, "
+                                "AnchoredFitter first_step, session 11, rule fixed before that "
+                                "session's test folds; with --first-step mix, the default, mixed "
+                                "row by row with the raw ARX's by their one-step errors over the "
+                                "100 rows before)" if first_on else "")
+            + ", convex weights per step and group chosen type out (each "
             "training type held out in turn from the components' training: the 0.01-grid "
             "point of the simplex whose worst held-out type has the least error relative to "
             "the raw-input ARX's; rule and design fixed before session 9's test folds were "

@@ -325,6 +325,12 @@ def _flight_groups(outputs) -> list:
     return groups if all(c in outputs for g in groups for c in g.columns) else []
 
 
+def _group_name(groups, label) -> str:
+    """A group label of ``AnchoredFitter._labels`` by name (the ungrouped outputs' by number)."""
+    label = int(label)
+    return groups[label].name if label < len(groups) else f"output group {label}"
+
+
 def _score_test(args, model, train, read) -> dict:
     """Scores of ``model`` on the --test record at h = 1, 10, 50 (those it is long enough
     for) beside the naive predictor; the group table printed."""
@@ -436,6 +442,13 @@ def _anchored(args, train, read) -> int:
               f"type-out score with it {t['scores']['with_direct']:.4g}, without "
               f"{t['scores']['without_direct']:.4g}: "
               + ("kept" if t["keep_direct"] else "left out"))
+        first = (c["direct"] or {}).get("first") or {}
+        if first.get("chosen"):
+            print("  its step 1 chosen type out per group (least mean one-step RMSE over the "
+                  "raw ARX's): " + ", ".join(
+                      f"{_group_name(groups, g)} {v}" for g, v in first["chosen"].items())
+                  + (f"; mixed row by row with the raw ARX's by their one-step errors over "
+                     f"the {first['mix'][2]} rows before" if first.get("mix") else ""))
     if c.get("blend_weights") is not None:
         where = "type out over " + ", ".join(c["type_out"]["types"]) if c.get("type_out") \
             else "on validation"
