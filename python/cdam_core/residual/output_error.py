@@ -216,9 +216,12 @@ def joint_refine(g, U, Y, starts, bounds: dict, norm, horizon: int, dt: float,
         except ValueError:                  # a diverging trial point: a large, finite error
             return np.full(n_res, 1e3)
 
+    # the Jacobian's sparsity, row by row: the P parameter columns, then the 2m state columns
+    # of the row's window (the values in the same order)
     rows = np.arange(n_res)
-    state_cols = P + np.repeat((rows // (H * m)) * 2 * m, 2 * m) + np.tile(np.arange(2 * m),
-                                                                           n_res)
+    jac_rows = np.repeat(rows, P + 2 * m)
+    jac_cols = np.c_[np.tile(np.arange(P), (n_res, 1)),
+                     P + 2 * m * (rows // (H * m))[:, None] + np.arange(2 * m)].ravel()
 
     def jacobian(z):
         X, V = states(z)
@@ -236,10 +239,9 @@ def joint_refine(g, U, Y, starts, bounds: dict, norm, horizon: int, dt: float,
         except ValueError:
             R = np.full((G, W, H * m), 1e3)
         Jp = ((R[1:P + 1] - R[0]) / h[:, None, None]).reshape(P, n_res).T
-        Js = ((R[P + 1:] - R[0]) / hs).transpose(1, 2, 0).reshape(-1)
-        S = sparse.csr_matrix((Js, (np.repeat(rows, 2 * m), state_cols)),
-                              shape=(n_res, P + 2 * m * W))
-        return (sparse.csr_matrix(np.hstack([Jp, np.zeros((n_res, 2 * m * W))])) + S).tocsr()
+        Js = ((R[P + 1:] - R[0]) / hs).transpose(1, 2, 0).reshape(n_res, 2 * m)
+        return sparse.csr_matrix((np.c_[Jp, Js].ravel(), (jac_rows, jac_cols)),
+                                 shape=(n_res, P + 2 * m * W))
 
     r0 = residual(z0)
     sol = least_squares(residual, z0, jac=jacobian, bounds=(lo, hi), method="trf",
