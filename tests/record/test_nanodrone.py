@@ -99,6 +99,49 @@ def test_exclusion_rules_on_synthetic_flights():
     assert spans[-1]["reason"] == "implausible motor speed"
 
 
+def test_a_flight_without_a_floor_keeps_its_lowest_stretch():
+    # cut to the airborne part (no takeoff or landing): the lowest height is flight, not floor
+    fl = _flight()
+    air = Dataset(t=fl.t[100:500], columns=fl.columns, data=fl.data[100:500])
+    z = air.column("z")
+    low = np.flatnonzero(z < z.min() + 0.05)
+    assert low.size > 10 and 0 < low[0] and low[-1] < len(z) - 1   # a low stretch mid-flight
+    drop, spans = flight_exclusions(air)
+    assert not drop.any() and spans == []
+
+
+@real
+def test_a_processed_flight_without_time_or_flags_is_read(tmp_path):
+    # the airborne middle of a flight, written without t and the status flags (as a processed
+    # benchmark file may be): read at the benchmark's 100 Hz, nothing left out for ground
+    # contact, every value the raw column's
+    raw = pd.read_parquet(SQUARE)
+    ds = load_nanodrone(SQUARE)
+    a, b = np.searchsorted(raw["t"], ds.t[0] + 3.0), np.searchsorted(raw["t"], ds.t[-1] - 3.0)
+    cut = raw.iloc[a:b].drop(columns=["t"] + [c for c in raw.columns if c.startswith("is_")])
+    z = cut["z"].to_numpy()
+    assert z[0] > z.min() + 0.05 and z[-1] > z.min() + 0.05       # no floor in the cut
+    cut.to_parquet(tmp_path / "square_cut.parquet")
+    got = load_nanodrone(tmp_path / "square_cut.parquet")
+    assert "no column t" in got.meta["time"] and "no status flags" in got.meta["flags"]
+    assert got.meta["trajectory"] == "square"
+    reasons = {e["reason"] for e in got.meta["excluded"]}
+    assert reasons <= {"NaN motor speed", "implausible motor speed"}
+    motors = cut[[f"m{k}_erpm" for k in range(1, 5)]].to_numpy()
+    ok = ~np.isnan(motors).any(axis=1)
+    assert len(got) == ok.sum()
+    np.testing.assert_array_equal(got.t, np.flatnonzero(ok) / 100.0)
+    for c in ("x", "qw", "wz"):
+        np.testing.assert_array_equal(got.column(c), cut[c].to_numpy()[ok])
+    np.testing.assert_allclose(got.column("w2"), motors[ok, 1] * np.pi / 180, rtol=1e-15)
+    (tmp_path / "bad.parquet").write_bytes(b"PAR1 not a parquet file")
+    with pytest.raises(ValueError, match=r"bad\.parquet: corrupt or unreadable Parquet"):
+        load_nanodrone(tmp_path / "bad.parquet")
+    cut.drop(columns=["qw"]).to_parquet(tmp_path / "noqw.parquet")
+    with pytest.raises(ValueError, match=r"noqw\.parquet: .*qw"):
+        load_nanodrone(tmp_path / "noqw.parquet")
+
+
 def _csv(path, n, seed):
     rng = np.random.default_rng(seed)
     u = rng.uniform(-1, 1, (n, 2))

@@ -14,7 +14,7 @@ import numpy as np
 
 from cdam_core.base.jsonio import atomic_target
 
-__all__ = ["frame_table", "read_parquet_table", "write_parquet_table"]
+__all__ = ["frame_table", "read_parquet_frame", "read_parquet_table", "write_parquet_table"]
 
 TIME_NAMES = ("t", "__time")
 
@@ -56,21 +56,27 @@ def frame_table(df, where: str = "dataframe", drop_other: bool = False):
     return ["t"] + cols[1:], arr, other
 
 
-def read_parquet_table(path, drop_other: bool = True):
-    """(names, array, non-numeric columns left out) of a Parquet file (see
-    :func:`frame_table`); ValueError naming the file when it is not a readable Parquet file or
-    has no rows."""
+def read_parquet_frame(path):
+    """A Parquet file as a pandas DataFrame; ValueError naming the file when it is not a
+    readable Parquet file or has no rows."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    path = Path(path)
     try:
         df = pq.read_table(path).to_pandas()
     except (pa.ArrowException, OSError, ValueError) as exc:
         raise ValueError(f"{path}: corrupt or unreadable Parquet file ({exc})") from None
     if len(df) == 0:
         raise ValueError(f"{path}: row 0: no data rows")
-    return frame_table(df, str(path), drop_other=drop_other)
+    return df
+
+
+def read_parquet_table(path, drop_other: bool = True):
+    """(names, array, non-numeric columns left out) of a Parquet file (see
+    :func:`frame_table`); ValueError naming the file when it is not a readable Parquet file or
+    has no rows."""
+    path = Path(path)
+    return frame_table(read_parquet_frame(path), str(path), drop_other=drop_other)
 
 
 def write_parquet_table(path, names: list[str], arr: np.ndarray) -> None:

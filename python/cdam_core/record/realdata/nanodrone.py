@@ -21,11 +21,17 @@ kinematic fact with its threshold in physical units, the same for every record:
   the no-load speed of the vehicle's 10,000 rpm/V motors on a full 1S battery (4.2 V); the
   flights reach about 2,500 rad/s, and the five telemetry glitches in them read 33,000 and
   105,000 rad/s (multisine runs 1 and 4): corrupted telemetry, not a rotor.
-- **not flying (flags)**: ``is_armed`` false, ``is_flying`` false or ``is_tumbled`` true.
+- **not flying (flags)**: ``is_armed`` false, ``is_flying`` false or ``is_tumbled`` true
+  (where the file has the flags; a flight without them is read, ``meta["flags"]`` says so, and
+  the rules below still apply).
 - **ground contact** (takeoff, landing, crash): height within ``GROUND_MARGIN`` = 0.05 m (about
   one rotor diameter) of the record's lowest height (the vehicle resting on the floor). Within
   one rotor diameter the ground reaction and ground effect act (the Cheeseman-Bennett ground
   effect falls below 2 % of thrust above it), which a free-flight model does not describe.
+  The lowest height is the floor only when the record starts or ends there (a logged takeoff,
+  landing or crash; all 17 flights here): a flight cut to its airborne part (as the
+  benchmark's own processed files may be) has no floor in it, and its lowest stretch of flight
+  is kept (``_floor``).
 - **diverging state estimate**: position and velocity are one estimate, so the position change
   over ``CONSISTENCY_WINDOW`` = 0.25 s must match the integral of the velocity; a mean
   disagreement above ``CONSISTENCY_LIMIT`` = 0.5 m/s (12.5 cm in 0.25 s, far above the
@@ -37,6 +43,9 @@ kinematic fact with its threshold in physical units, the same for every record:
   halving the duration adds the 0.25 s crash spike of square run 1, already on the ground).
 - Kept pieces shorter than ``SUSTAINED`` between two flight-state exclusions (bounces on
   landing) are left out with them: no 50-step prediction fits in them.
+
+A file without the time column ``t`` is read as the benchmark's 100 Hz samples from t = 0
+(``meta["time"]`` says so); every other column is read as named above.
 
 On the 17 flights these rules leave out takeoff and landing of every flight, the crash and
 ground time of square run 1 (flags and ground), five motor-telemetry glitches, and one
@@ -52,6 +61,7 @@ from pathlib import Path
 import numpy as np
 
 from cdam_core.record.dataset import Dataset, read_dataset
+from cdam_core.record.parquet import read_parquet_frame
 from cdam_core.record.realdata import shared_data_dir
 
 __all__ = ["load_nanodrone", "nanodrone_files", "trajectory_type", "flight_exclusions",
@@ -69,6 +79,7 @@ CONSISTENCY_WINDOW = 0.25   # s
 CONSISTENCY_LIMIT = 0.5     # m/s
 SUSTAINED = 0.5             # s, the benchmark's horizon
 MAX_MOTOR_SPEED = 4400.0    # rad/s: 10,000 rpm/V x 4.2 V no-load
+RATE = 100.0                # Hz, the benchmark's sampling rate
 
 UNITS = {**{w: "rad/s" for w in INPUTS}, "x": "m", "y": "m", "z": "m", "vx": "m/s",
          "vy": "m/s", "vz": "m/s", "qx": "1", "qy": "1", "qz": "1", "qw": "1",
@@ -124,6 +135,13 @@ def _implausible(ds: Dataset) -> np.ndarray:
     return np.any((w < 0) | (w > MAX_MOTOR_SPEED), axis=1)
 
 
+def _floor(z: np.ndarray) -> np.ndarray:
+    """Rows within ``GROUND_MARGIN`` of the lowest height, where the record starts or ends
+    there (it holds the floor); none otherwise (module doc)."""
+    low = z < z.min() + GROUND_MARGIN
+    return low if (low[0] or low[-1]) else np.zeros(len(z), bool)
+
+
 def flight_exclusions(ds: Dataset) -> tuple[np.ndarray, list[dict]]:
     """(rows to leave out, bool (N,); [{"reason", "t_start", "t_stop", "samples"}]) of a
     loaded flight (flags, ground contact, diverging estimate; module doc)."""
@@ -136,7 +154,7 @@ def flight_exclusions(ds: Dataset) -> tuple[np.ndarray, list[dict]]:
             (flags["is_tumbled"] > 0.5 if "is_tumbled" in flags else False)) &
         np.ones(len(t), bool),
         "implausible motor speed": _implausible(ds),
-        "ground contact": ds.column("z") < ds.column("z").min() + GROUND_MARGIN,
+        "ground contact": _floor(ds.column("z")),
         "diverging state estimate": _diverging(t, ds.select(["x", "y", "z"]),
                                                ds.select(["vx", "vy", "vz"])),
     }
@@ -163,12 +181,10 @@ def load_nanodrone(path, exclude: bool = True) -> Dataset:
     every span left out with its reason."""
     path = Path(path)
     mapping = {w: f"m{k + 1}_erpm*{ERPM_TO_RAD_S!r}" for k, w in enumerate(INPUTS)}
-    ds = read_dataset(path, inputs=INPUTS, outputs=STATES, mapping=mapping, nan="split")
-    missing = [c for c in STATES + list(FLAGS[:2]) if c not in ds.columns]
+    ds, t_all, timed = _read(path, mapping)
+    missing = [c for c in STATES if c not in ds.columns]
     if missing:
         raise ValueError(f"{path}: not a nano-drone flight: no column {', '.join(missing)}")
-    import pyarrow.parquet as pq
-    t_all = pq.read_table(path, columns=["t"]).column("t").to_numpy()
     gone = np.setdiff1d(t_all, ds.t)
     excluded = [{"reason": "NaN motor speed", "t_start": float(x), "t_stop": float(x),
                  "samples": 1} for x in gone]
@@ -186,10 +202,38 @@ def load_nanodrone(path, exclude: bool = True) -> Dataset:
         "path": str(path), "rate": 100.0, "units": {c: UNITS[c] for c in keep if c in UNITS},
         "trajectory": trajectory_type(path),
         "conversion": "w_i = m{i}_erpm * 2 pi / 360 (rad/s)",
+        "flags": ("status flags read: " + ", ".join(f for f in FLAGS if f in ds.columns))
+        if any(f in ds.columns for f in FLAGS) else
+        "no status flags in the file: flight state from ground contact and the estimate only",
         "excluded": sorted(excluded, key=lambda e: e["t_start"]),
     })
+    if not timed:
+        meta["time"] = f"no column t in the file: rows taken as {RATE:g} Hz samples from t = 0"
     return Dataset(t=ds.t, columns=keep, data=ds.select(keep), meta=meta,
                    input_names=INPUTS, output_names=STATES)
+
+
+def _read(path: Path, mapping: dict) -> tuple[Dataset, np.ndarray, bool]:
+    """(the flight through the dataset path, every row's time, whether the file had ``t``):
+    ``read_dataset``, or for a file without a time column the same path from a DataFrame with
+    ``t`` at the benchmark's rate (module doc)."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+    try:
+        names = pq.read_schema(path).names
+    except (pa.ArrowException, OSError, ValueError) as exc:
+        raise ValueError(f"{path}: corrupt or unreadable Parquet file ({exc})") from None
+    if "t" in names or "__time" in names:
+        ds = read_dataset(path, inputs=INPUTS, outputs=STATES, mapping=mapping, nan="split")
+        tname = "t" if "t" in names else "__time"
+        return ds, pq.read_table(path, columns=[tname]).column(tname).to_numpy(), True
+    df = read_parquet_frame(path)
+    df.insert(0, "t", np.arange(len(df)) / RATE)
+    try:
+        ds = Dataset.from_dataframe(df, INPUTS, STATES, mapping=mapping, nan="split")
+    except ValueError as exc:
+        raise ValueError(f"{path}: {str(exc).removeprefix('dataframe: ')}") from None
+    return ds, df["t"].to_numpy(), False
 
 
 def exclusion_report(files=None) -> str:
