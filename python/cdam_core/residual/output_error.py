@@ -39,20 +39,22 @@ multiples of a first pass's sigma (1/4 to 4), per parameter the median sigma; a 
 (the optimiser's, or one sigma) left one parameter of a record 40-65 % off the others now
 and then (README joint: Fc seed 2 0.27 % at the optimiser's step against 0.79-0.81 % at
 1/4-4 sigma; Kd seed 4 0.14 % at one sigma against 0.24 % at the others): a friction switch
-crossed by that step's difference. Measured (session 12) on the README's joint, seeds 0-5,
-8, 9 of the independent generator (8 records, so each spread is uncertain by about 25 %;
-seed 6 finds no dry friction, seed 7's windows are fitted 10 % better at its estimate, Fc
--9.8 %, than at the truth: left out), mean relative sigma against the spread of the errors
-over the seeds: Im 0.027 / 0.051 %, Dm 0.29 / 0.26 %, Ks 0.019 / 0.026 %, Kd 0.23 / 0.20 %,
-Fc 0.72 / 0.86 %, I 0.017 / 0.022 %, Dl 0.106 / 0.152 %, G 0.054 / 0.068 % (ratios
-0.52-1.14). Im's spread is partly the rollout the loop chooses per seed (Im -0.05..+0.01 %
-with stick-slip, +0.05..+0.09 % with the sign held; stick-slip on every seed: ratio 0.76), a
-model approximation that varies between records, which no sigma of one record sees. Few
-clusters are not the reason for ratios below 1: the delete-one-window jackknife (CR3) gives
-within 4 % of the same. On the link-PD joint at 250 Hz (tests/residual/
-test_independent_joint.py, condition C, seeds 0-7): ratios 0.77-1.57. The nested fit's
-sandwich at the joint estimate (session 11's sigmas) was 2.0-7.0 times the spread on the
-README joint (Fc 5.2 %, Dm 1.5 %, Kd 1.4 %) and 1.2-3.1 times on C.
+crossed by that step's difference. Measured (session 12) on the README's joint, seeds 0-19
+of the independent generator less 6, 7 and 15 (17 records, so each spread is uncertain by
+about 18 %; seeds 6 and 15 find no dry friction, seed 7's windows are fitted 10 % better at
+its estimate, Fc -9.8 %, than at the truth), mean relative sigma against the spread of the
+errors over the seeds: Im 0.026 / 0.056 %, Dm 0.31 / 0.30 %, Ks 0.020 / 0.021 %, Kd 0.23 /
+0.20 %, Fc 0.76 / 0.81 %, I 0.018 / 0.020 %, Dl 0.116 / 0.120 %, G 0.056 / 0.057 % (ratios
+0.88-1.18, Im 0.47). Im's spread is mostly the rollout the loop chooses per seed: +0.07 % on
+average on the 7 seeds whose windows hold the friction's sign, -0.02 % on the 10 that
+simulate stick-slip; on those 10 alone the ratios are 1.04-1.85 (Im 1.18), on the 7 held
+0.59-1.47: a model approximation that varies between records, which no sigma of one record
+sees. Few clusters are not the reason for ratios below 1: the delete-one-window jackknife
+(CR3) gives within 4 % of the same (seeds 0-5, 8, 9). On the link-PD joint at 250 Hz
+(tests/residual/test_independent_joint.py, condition C, stick-slip on every seed, seeds
+0-7): ratios 0.77-1.57. The nested fit's
+sandwich at the joint estimate (session 11's sigmas) was 1.6-8.1 times the spread on the
+README joint (Fc 5.4 %, Dm 1.5 %, Kd 1.6 %) and 1.2-3.1 times on C.
 
 When to stop: a move of a tenth of a standard deviation changes the cost (half the sum of
 squared residuals, F = dof s^2 / 2 at the optimum for independent residuals) by about
