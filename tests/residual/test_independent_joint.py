@@ -281,6 +281,17 @@ def test_rigid_axis_with_long_stops(seed):
     assert sel.final.theta["coulomb_friction@tau.Fc"] == pytest.approx(2.0, rel=0.05)
 
 
+@lru_cache(maxsize=None)
+def _readme_joint(seed):
+    """The README's joint (vertical plane, motor PD at 500 Hz, 4096-count noisy link encoder,
+    motor dry friction 0.03 N m) and the loop on it, the estimator and rollout by default."""
+    r = Joint(fs=500, plane="vertical", control="motor", link_counts=4096, link_noise=2e-4,
+              motor_counts=16384, Fc=0.03, seed=seed).record()
+    sel = analyse("flexible_joint", r["t"], {k: r[k] for k in ("tau_m", "theta_m", "q")},
+                  free_run=False)
+    return r, sel
+
+
 @pytest.mark.parametrize("seed", [0, 2])
 def test_dry_and_viscous_friction_of_the_readme_joint_within_2_percent(seed):
     """The README's joint (vertical plane, motor PD at 500 Hz, 4096-count noisy link encoder,
@@ -291,12 +302,26 @@ def test_dry_and_viscous_friction_of_the_readme_joint_within_2_percent(seed):
     estimate now fits the windows' states beside the parameters (output_error.joint_refine):
     measured every parameter within 0.4 % on seed 0 and 0.45 % on seed 2. Expected values:
     the generator's truth. (About 15 s each.)"""
-    r = Joint(fs=500, plane="vertical", control="motor", link_counts=4096, link_noise=2e-4,
-              motor_counts=16384, Fc=0.03, seed=seed).record()
-    sel = analyse("flexible_joint", r["t"], {k: r[k] for k in ("tau_m", "theta_m", "q")},
-                  free_run=False)
+    r, sel = _readme_joint(seed)
     assert sel.settings["estimator"]["chosen"] == "output error (multiple shooting)"
     assert "joint" not in sel.settings["estimator"]["refinement"]     # it ran
     for p in ("Im", "Dm", "Ks", "Kd", "I", "Dl", "G"):
         assert sel.final.theta[p] == pytest.approx(r["truth"][p], rel=0.02), p
     assert sel.final.theta["coulomb_friction@tau_m.Fc"] == pytest.approx(0.03, rel=0.02)
+
+
+@pytest.mark.parametrize("seed", [0, 2])
+def test_sigmas_of_the_readme_joint_match_the_spread_over_seeds(seed):
+    """The output-error estimate's relative sigmas (the joint problem's sandwich, each window's
+    state projected out: output_error.joint_covariance) against the spread of the estimate
+    over records. Measured (session 12) on this record, seeds 0-19 less 6, 7 and 15 (6 and 15
+    find no dry friction; seed 7's windows are fitted 10 % better at its estimate, Fc -9.8 %,
+    than at the truth), the errors' standard deviation over the 17 seeds: Fc 0.81 %, Dm
+    0.30 % (uncertain by about 18 %); the mean sigmas Fc 0.76 %, Dm 0.31 %.
+    A sigma within a factor 3 of that spread either way; session 11's sigmas (the nested
+    state fit's sensitivities) were Fc 6.0 %, Dm 1.9 % on seed 0. The analysis is shared with
+    the test above (no extra run)."""
+    _, sel = _readme_joint(seed)
+    for p, spread in (("coulomb_friction@tau_m.Fc", 0.81), ("Dm", 0.30)):
+        rel = 100 * sel.final.std[p] / sel.final.theta[p]
+        assert spread / 3 < rel < 3 * spread, (p, rel)

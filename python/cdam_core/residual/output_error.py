@@ -28,6 +28,34 @@ s^2 (J'J)^-1 on the per-window root mean squares had the flat Jacobian above in 
 of 30-40 % where the errors were < 1.3 %. Coverage on the independent generator: see the
 report of [greybox] 19 (session 8) and tests/residual/test_oe_covariance.py.
 
+The final estimate's (:func:`joint_refine`, every window's state an unknown beside the
+parameters) are the same sandwich of that joint problem at its optimum
+(:func:`joint_covariance`): per window the residual e_w, the parameters' sensitivities Jp_w
+and the window's own state sensitivities Js_w; the states projected out exactly
+(Jp_w - Js_w Js_w^+ Jp_w; as each window's states enter its own residuals alone and their
+scores are zero at the optimum, this is the parameters' block of the whole problem's
+sandwich), then A and B as above. The sensitivities: central differences over several
+multiples of a first pass's sigma (1/4 to 4), per parameter the median sigma; a single step
+(the optimiser's, or one sigma) left one parameter of a record 40-65 % off the others now
+and then (README joint: Fc seed 2 0.27 % at the optimiser's step against 0.79-0.81 % at
+1/4-4 sigma; Kd seed 4 0.14 % at one sigma against 0.24 % at the others): a friction switch
+crossed by that step's difference. Measured (session 12) on the README's joint, seeds 0-19
+of the independent generator less 6, 7 and 15 (17 records, so each spread is uncertain by
+about 18 %; seeds 6 and 15 find no dry friction, seed 7's windows are fitted 10 % better at
+its estimate, Fc -9.8 %, than at the truth), mean relative sigma against the spread of the
+errors over the seeds: Im 0.026 / 0.056 %, Dm 0.31 / 0.30 %, Ks 0.020 / 0.021 %, Kd 0.23 /
+0.20 %, Fc 0.76 / 0.81 %, I 0.018 / 0.020 %, Dl 0.116 / 0.120 %, G 0.056 / 0.057 % (ratios
+0.88-1.18, Im 0.47). Im's spread is mostly the rollout the loop chooses per seed: +0.07 % on
+average on the 7 seeds whose windows hold the friction's sign, -0.02 % on the 10 that
+simulate stick-slip; on those 10 alone the ratios are 1.04-1.85 (Im 1.18), on the 7 held
+0.59-1.47: a model approximation that varies between records, which no sigma of one record
+sees. Few clusters are not the reason for ratios below 1: the delete-one-window jackknife
+(CR3) gives within 4 % of the same (seeds 0-5, 8, 9). On the link-PD joint at 250 Hz
+(tests/residual/test_independent_joint.py, condition C, stick-slip on every seed, seeds
+0-7): ratios 0.77-1.57. The nested fit's
+sandwich at the joint estimate (session 11's sigmas) was 1.6-8.1 times the spread on the
+README joint (Fc 5.4 %, Dm 1.5 %, Kd 1.6 %) and 1.2-3.1 times on C.
+
 When to stop: a move of a tenth of a standard deviation changes the cost (half the sum of
 squared residuals, F = dof s^2 / 2 at the optimum for independent residuals) by about
 0.005 s^2, a share 0.01 / dof of F; smaller improvements are statistically nothing, so that
@@ -55,6 +83,10 @@ __all__ = ["refine", "refined_fit"]
 MAX_EVALUATIONS = 80   # a cap, not a tuning: the stop is the tenth-of-a-sigma rule (above)
 MAX_RESTARTS = 3       # continuations after the sandwich's sigma is known (a cap)
 DIFF_STEP = 1e-4   # relative step of the forward differences (scipy's diff_step)
+STATE_STEP = 1e-4  # joint_refine's state steps, in units of its state offsets
+# joint_covariance's central differences, in first-pass sigmas: steps on the estimate's own
+# scale (module doc); several, their sigmas' median per parameter
+SIGMA_SCALES = (0.25, 0.5, 1.0, 2.0, 4.0)
 
 
 def refine(g, U, Y, starts, shooting, bounds: dict) -> tuple[dict, dict]:
@@ -177,71 +209,37 @@ def joint_refine(g, U, Y, starts, bounds: dict, norm, horizon: int, dt: float,
     nested estimate 7.88e-7 / 7.74e-7 after one state step, 6.21e-7 / 6.42e-7 after four;
     the nested estimate Fc -17 %, Dm +5.2 %, this one every parameter within 0.4 %. (Iterating
     the nested state fit instead made the cost move in steps with the parameters: the rigid
-    axis of tests/residual/test_simulation_error.py then gave Fc -8 %.)"""
-    H, m, W = int(horizon), Y.shape[1], starts.size
+    axis of tests/residual/test_simulation_error.py then gave Fc -8 %.)
+
+    The report's ``std``: the standard deviations of this problem at its optimum
+    (:func:`joint_covariance`, module doc), NaN where they cannot be formed."""
     names = list(g.estimated_)
     P = len(names)
-    full = list(g.theta_)
-    cols = [full.index(p) for p in names]
-    scale, lo, hi, z0 = _bounded_start(g, names, bounds, 2 * m * W)
-    sx = np.sqrt(np.asarray(norm, dtype=float))          # state offsets in the outputs' scale
-    sv = sx / (H * float(dt))
-    w = 1.0 / sx / np.sqrt(H * m)
-    idx = starts[None, :] + np.arange(1, H + 1)[:, None]
-    xm = Y[starts].astype(float)
-    vm = (Y[starts] - Y[starts - 1]) / float(dt)
-    base = np.array([g.theta_[p] for p in full], dtype=float)
-    n_res = W * H * m
-    hs = 1e-4
-
-    def states(z):
-        o = z[P:].reshape(W, 2 * m)
-        return xm + o[:, :m] * sx, vm + o[:, m:] * sv
-
-    def theta_row(z):
-        th = base.copy()
-        th[cols] = z[:P] * scale
-        return th
-
-    def errors(TH, X, V):                                 # (groups, W, H m)
-        out = g.windows(U, Y, np.tile(starts, TH.shape[0]), H, X, V, integrator=integrator,
-                        thetas=TH).reshape(H, TH.shape[0], W, m)
-        return np.transpose((out - Y[idx][:, None]) * w, (1, 2, 0, 3)).reshape(
-            TH.shape[0], W, H * m)
+    scale, lo, hi, z0 = _bounded_start(g, names, bounds, 2 * Y.shape[1] * starts.size)
+    win = _JointWindows(g, U, Y, starts, names, scale, norm, horizon, dt, integrator)
+    W, n_res, k = starts.size, win.n_res, P + 2 * win.m
 
     def residual(z):
-        X, V = states(z)
         try:
-            return errors(theta_row(z)[None], X, V).reshape(-1)
+            return win.errors(z).reshape(-1)
         except ValueError:                  # a diverging trial point: a large, finite error
             return np.full(n_res, 1e3)
 
     # the Jacobian's sparsity, row by row: the P parameter columns, then the 2m state columns
     # of the row's window (the values in the same order)
     rows = np.arange(n_res)
-    jac_rows = np.repeat(rows, P + 2 * m)
+    jac_rows = np.repeat(rows, k)
     jac_cols = np.c_[np.tile(np.arange(P), (n_res, 1)),
-                     P + 2 * m * (rows // (H * m))[:, None] + np.arange(2 * m)].ravel()
+                     P + 2 * win.m * (rows // (n_res // W))[:, None]
+                     + np.arange(2 * win.m)].ravel()
 
     def jacobian(z):
-        X, V = states(z)
-        h = _steps(z[:P], lo[:P], hi[:P])
-        G = P + 1 + 2 * m
-        TH = np.tile(theta_row(z), (G, 1))
-        for j in range(P):
-            TH[1 + j, cols[j]] = (z[j] + h[j]) * scale[j]
-        XX, VV = np.tile(X, (G, 1)), np.tile(V, (G, 1))
-        for j in range(m):
-            XX[(P + 1 + j) * W:(P + 2 + j) * W, j] += hs * sx[j]
-            VV[(P + 1 + m + j) * W:(P + 2 + m + j) * W, j] += hs * sv[j]
         try:
-            R = errors(TH, XX, VV)
+            _, D = win.sensitivities(z, _steps(z[:P], lo[:P], hi[:P]), STATE_STEP)
         except ValueError:
-            R = np.full((G, W, H * m), 1e3)
-        Jp = ((R[1:P + 1] - R[0]) / h[:, None, None]).reshape(P, n_res).T
-        Js = ((R[P + 1:] - R[0]) / hs).transpose(1, 2, 0).reshape(n_res, 2 * m)
-        return sparse.csr_matrix((np.c_[Jp, Js].ravel(), (jac_rows, jac_cols)),
-                                 shape=(n_res, P + 2 * m * W))
+            D = np.zeros((k, W, n_res // W))
+        return sparse.csr_matrix((np.transpose(D, (1, 2, 0)).ravel(), (jac_rows, jac_cols)),
+                                 shape=(n_res, z0.size))
 
     r0 = residual(z0)
     sol = least_squares(residual, z0, jac=jacobian, bounds=(lo, hi), method="trf",
@@ -249,23 +247,116 @@ def joint_refine(g, U, Y, starts, bounds: dict, norm, horizon: int, dt: float,
                         ftol=0.01 / max(n_res - z0.size, 1))
     theta = dict(zip(names, map(float, sol.x[:P] * scale)))
     g.set_parameters(theta)
+    try:
+        sd = joint_covariance(win, sol.x, lo[:P], hi[:P])
+    except (ValueError, np.linalg.LinAlgError):
+        sd = np.full(P, np.nan)
+    std = {p: float(sd[j] * scale[j]) if np.isfinite(sd[j]) and sd[j] > 0 else float("nan")
+           for j, p in enumerate(names)}
     return {"window_rms_before": float(np.sqrt(r0 @ r0 / W)),
             "window_rms_after": float(np.sqrt(sol.fun @ sol.fun / W)),
-            "evaluations": int(sol.nfev), "status": sol.message,
+            "evaluations": int(sol.nfev), "status": sol.message, "std": std,
+            "std_method": "cluster-robust sandwich, windows as clusters, each window's "
+                          "state projected out",
             "method": "multiple shooting, the windows' states estimated with the parameters"}
 
 
-def covariance_at(g, U, Y, starts, shooting, bounds: dict) -> dict:
-    """The standard deviations of ``g``'s estimated parameters at their current values
-    (:func:`window_covariance` on the windows at ``starts``), by name."""
-    names = list(g.estimated_)
-    th = np.array([g.theta_[p] for p in names], dtype=float)
-    scale = np.where(np.abs(th) > 0, np.abs(th), 1.0)
-    lo = np.array([bounds.get(p, (-np.inf, np.inf))[0] for p in names]) / scale
-    hi = np.array([bounds.get(p, (-np.inf, np.inf))[1] for p in names]) / scale
-    sd, _, _ = window_covariance(g, U, Y, starts, shooting, names, th / scale, scale, lo, hi)
-    return {p: float(sd[j] * scale[j]) if np.isfinite(sd[j]) and sd[j] > 0 else float("nan")
-            for j, p in enumerate(names)}
+class _JointWindows:
+    """The windows of :func:`joint_refine`'s problem: decision vector z = the estimated
+    parameters ``names`` over ``scale``, then per window its state offsets (positions over
+    sqrt(norm), velocities over sqrt(norm) / (horizon dt)) from the measured position and the
+    backward difference; residuals per window over sqrt(norm) / sqrt(horizon outputs)."""
+
+    def __init__(self, g, U, Y, starts, names, scale, norm, horizon, dt, integrator):
+        self.g, self.U, self.Y, self.starts = g, U, Y, starts
+        self.H, self.m, self.W = int(horizon), Y.shape[1], starts.size
+        self.P, self.scale, self.integrator = len(names), scale, integrator
+        full = list(g.theta_)
+        self.cols = [full.index(p) for p in names]
+        self.base = np.array([g.theta_[p] for p in full], dtype=float)
+        self.sx = np.sqrt(np.asarray(norm, dtype=float))   # state offsets in the outputs' scale
+        self.sv = self.sx / (self.H * float(dt))
+        self.w = 1.0 / self.sx / np.sqrt(self.H * self.m)
+        self.idx = starts[None, :] + np.arange(1, self.H + 1)[:, None]
+        self.xm = Y[starts].astype(float)
+        self.vm = (Y[starts] - Y[starts - 1]) / float(dt)
+        self.n_res = self.W * self.H * self.m
+
+    def _batch(self, z, G):
+        """(thetas, positions, velocities) of ``G`` groups at ``z``."""
+        o = z[self.P:].reshape(self.W, 2 * self.m)
+        th = self.base.copy()
+        th[self.cols] = z[:self.P] * self.scale
+        return (np.tile(th, (G, 1)), np.tile(self.xm + o[:, :self.m] * self.sx, (G, 1)),
+                np.tile(self.vm + o[:, self.m:] * self.sv, (G, 1)))
+
+    def _run(self, TH, X, V) -> np.ndarray:                # (groups, W, H m)
+        out = self.g.windows(self.U, self.Y, np.tile(self.starts, TH.shape[0]), self.H, X, V,
+                             integrator=self.integrator,
+                             thetas=TH).reshape(self.H, TH.shape[0], self.W, self.m)
+        return np.transpose((out - self.Y[self.idx][:, None]) * self.w, (1, 2, 0, 3)).reshape(
+            TH.shape[0], self.W, self.H * self.m)
+
+    def errors(self, z) -> np.ndarray:
+        """The residuals at ``z``, (W, H m)."""
+        return self._run(*self._batch(z, 1))[0]
+
+    def sensitivities(self, z, h, hs, central: bool = False) -> tuple:
+        """(residuals (W, H m), their differences (P + 2m, W, H m)) at ``z``: forward
+        (``central`` False) or central differences, steps ``h`` for the parameters and ``hs``
+        for every window's state components (each component of every window perturbed in one
+        group), every group of one batched simulation."""
+        P, m, W = self.P, self.m, self.W
+        k = P + 2 * m
+        signs = (1.0, -1.0) if central else (1.0,)
+        TH, X, V = self._batch(z, 1 + k * len(signs))
+        for i, sg in enumerate(signs):
+            g0 = 1 + i * k
+            for j in range(P):
+                TH[g0 + j, self.cols[j]] = (z[j] + sg * h[j]) * self.scale[j]
+            for j in range(m):
+                X[(g0 + P + j) * W:(g0 + P + j + 1) * W, j] += sg * hs * self.sx[j]
+                V[(g0 + P + m + j) * W:(g0 + P + m + j + 1) * W, j] += sg * hs * self.sv[j]
+        R = self._run(TH, X, V)
+        step = np.r_[h, np.full(2 * m, hs)][:, None, None]
+        D = (R[1:1 + k] - R[1 + k:]) / (2 * step) if central else (R[1:] - R[:1]) / step
+        return R[0], D
+
+
+def joint_covariance(win: _JointWindows, z, lo, hi) -> np.ndarray:
+    """Standard deviations (scaled coordinates) of :func:`joint_refine`'s parameters at its
+    optimum ``z`` (module doc): per window the residual e_w, the parameters' sensitivities
+    Jp_w and the window's own state sensitivities Js_w; the states projected out exactly
+    (Jp_w - Js_w Js_w^+ Jp_w), then the cluster-robust sandwich over windows. A first pass
+    with the optimiser's forward steps, then central differences over :data:`SIGMA_SCALES`
+    times that pass's sigma (as :func:`window_covariance`'s second pass, each step at least
+    the optimiser's, at most a tenth of the value, inside the bounds) and per parameter the
+    median of their sigmas: a friction switch that one step's difference crosses moves that
+    step's sigma (module doc), the median leaves it out."""
+    P = win.P
+    h = _steps(z[:P], lo, hi)
+    first = _projected_sandwich(*win.sensitivities(z, h, STATE_STEP), P)
+    sds = []
+    for f in SIGMA_SCALES:
+        wide = _wide_steps(f * first, h, z[:P], lo, hi)
+        if np.all(wide > 0):
+            sds.append(_projected_sandwich(*win.sensitivities(z, wide, STATE_STEP, central=True),
+                                           P))
+    return np.median(sds, axis=0) if sds else first
+
+
+def _projected_sandwich(e, D, P: int) -> np.ndarray:
+    """sqrt(diag(cov)) of the cluster-robust sandwich (:func:`_cluster_sandwich`) of the first
+    ``P`` of the sensitivities ``D`` (columns, W, n) with the rest (each window's own nuisance
+    columns) projected out per window (their singular directions above ``sqrt(eps)`` of the
+    largest, as the nested state fit's cut)."""
+    J = np.transpose(D, (1, 2, 0))                                  # (W, n, columns)
+    Jp, Js = J[..., :P], J[..., P:]
+    Q, s, _ = np.linalg.svd(Js, full_matrices=False)
+    keep = s > np.sqrt(np.finfo(float).eps) * s[:, :1]
+    Q = Q * keep[:, None, :]
+    Jp = Jp - Q @ (np.transpose(Q, (0, 2, 1)) @ Jp)
+    return _cluster_sandwich(Jp, e)[0]
 
 
 def window_covariance(g, U, Y, starts, shooting, names, x, scale, lo, hi) -> tuple:
@@ -281,12 +372,18 @@ def window_covariance(g, U, Y, starts, shooting, names, x, scale, lo, hi) -> tup
     estimate, so the sensitivities are taken over its scale."""
     h = _steps(x, lo, hi)
     sd, A, n = _sandwich(g, U, Y, starts, shooting, names, x, scale, h, central=False)
-    room = np.minimum(x - lo, hi - x)
-    wide = np.clip(sd, np.abs(h), 0.1 * np.maximum(np.abs(x), np.abs(h)))
-    wide = np.where(np.isfinite(wide), np.minimum(wide, 0.999 * room), np.abs(h))
+    wide = _wide_steps(sd, h, x, lo, hi)
     if np.all(wide > 0):
         sd, A, n = _sandwich(g, U, Y, starts, shooting, names, x, scale, wide, central=True)
     return sd, A, n
+
+
+def _wide_steps(sd, h, x, lo, hi) -> np.ndarray:
+    """The second pass's steps: one first-pass standard deviation ``sd``, at least the
+    optimiser's step ``h``, at most a tenth of the value, inside the bounds."""
+    room = np.minimum(x - lo, hi - x)
+    wide = np.clip(sd, np.abs(h), 0.1 * np.maximum(np.abs(x), np.abs(h)))
+    return np.where(np.isfinite(wide), np.minimum(wide, 0.999 * room), np.abs(h))
 
 
 def _sandwich(g, U, Y, starts, shooting, names, x, scale, h, central: bool) -> tuple:
@@ -309,13 +406,19 @@ def _sandwich(g, U, Y, starts, shooting, names, x, scale, h, central: bool) -> t
         D = (R[1:1 + P] - R[1 + P:]) / (2 * h[:, None, None])
     else:
         D = (R[1:] - e[None]) / h[:, None, None]
-    J = np.transpose(D, (1, 2, 0))                                # (W, H m, p)
+    sd, A = _cluster_sandwich(np.transpose(D, (1, 2, 0)), e)
+    return sd, A, e.shape[1]
+
+
+def _cluster_sandwich(J, e) -> tuple:
+    """(sqrt(diag(A^-1 B A^-1 W / (W - p))), A) of sensitivities ``J`` (W, n, p) and
+    residuals ``e`` (W, n): A = sum_w J_w' J_w, B the windows' scores J_w' e_w (module doc)."""
     A = np.einsum("wnp,wnq->pq", J, J)
     score = np.einsum("wnp,wn->wp", J, e)
-    W = score.shape[0]
+    W, P = score.shape
     Ai = np.linalg.pinv(A)
     cov = Ai @ (score.T @ score) @ Ai * (W / max(W - P, 1))
-    return np.sqrt(np.maximum(np.diag(cov), 0.0)), A, e.shape[1]
+    return np.sqrt(np.maximum(np.diag(cov), 0.0)), A
 
 
 def _steps(x, lo, hi, rel: float = DIFF_STEP) -> np.ndarray:

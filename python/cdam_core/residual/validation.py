@@ -41,7 +41,7 @@ from cdam_core.models.greybox.augmented import INTEGRATORS
 from cdam_core.models.greybox.estimation import design, fit
 from cdam_core.residual.benchmark import greybox_of
 from cdam_core.residual.instrumental import iv_fit
-from cdam_core.residual.output_error import (covariance_at, joint_refine, refine, runs,
+from cdam_core.residual.output_error import (joint_refine, refine, runs,
                                              simulation_refine)
 
 __all__ = ["BlockedCV", "Comparison", "midpoint", "motion_horizon", "paired"]
@@ -342,8 +342,8 @@ class BlockedCV:
         """Output-error refinement of GreyBox ``g`` (from IDIM fit ``f``) on the windows of
         the rows in ``mask``; returns the refinement's report. ``joint`` (the final
         estimate's): then from that optimum the windows' states estimated with the parameters
-        (:func:`~cdam_core.residual.output_error.joint_refine`), the standard deviations the
-        sandwich's at that point."""
+        (:func:`~cdam_core.residual.output_error.joint_refine`), the standard deviations
+        that joint problem's (each window's state projected out)."""
         bounds = dict(getattr(f.model, "bounds", {}) or {})
         for e in f.effects:
             bounds.update(e.bounds())
@@ -356,7 +356,6 @@ class BlockedCV:
             try:
                 info = joint_refine(g, U, self.Y, starts, bounds, self.norm, self.horizon,
                                     self.dt, self.integrator)
-                info["std"] = covariance_at(g, U, self.Y, starts, self._shooting, bounds)
             except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
                 g.set_parameters(before)
                 info = {**info, "joint": {"status": "unavailable", "reason": str(exc)}}
