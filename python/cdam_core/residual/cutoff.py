@@ -123,7 +123,10 @@ def at_rest(model, candidates, choice: dict, alpha: float) -> list:
     zero-phase filter weighs its neighbours over the main lobe). Measured on the independent
     generator's axis with long stops (Fc 2, 8192 counts, 500 Hz, seeds 0-3, IDIM-LS with the
     Coulomb term): rows at rest only, Fv +10..+18 % and Fc -6..-12 %; the main lobe left out as
-    well, every one of M, Fv, Fc within 0.7 %."""
+    well, every one of M, Fv, Fc within 0.7 %. At Fc 3 (more than half the record stuck) the
+    sign column at the rows at rest, the sign of the velocity noise, low-passed into the rows
+    kept, still gave Fv +7.6 % (seed 2): it is 0 there (``CoulombFriction.regressors``),
+    Fv -0.9 %."""
     z = float(stats.norm.ppf(1 - alpha / 2))
     out = []
     for c in candidates:
