@@ -58,6 +58,7 @@ def input_driven_terms(fitted, sig: dict, substeps: int | None = None) -> dict:
         raw[p] = q
     run = model.prepare(sig["t"], raw, sig["filter"], sig.get("extra") or None,
                         sig.get("timing", "sampled"))
+    run.measured = False   # a simulated run: no encoder noise in its positions
     _, eqs = design(model, run, fitted.effects)
     out = {}
     for eq, (y, cols) in eqs.items():

@@ -106,6 +106,7 @@ def _simulated_signals(fitted: Fit, sig, U, horizon: int, trim: int, integrator:
         raw[p] = q
     out = model.prepare(sig["t"], raw, filt, sig.get("extra") or None,
                         sig.get("timing", "sampled"))
+    out.measured = False   # simulated windows: no encoder noise in their positions
     covered = np.zeros(n, dtype=bool)
     covered[starts[0]:starts[-1] + H + 1] = True
     for s0 in list(starts) + [starts[-1] + H]:

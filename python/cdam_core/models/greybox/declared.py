@@ -116,11 +116,15 @@ class Signals(dict):
         self.weights: dict[str, float] = {}    # IDIM-WLS equation weights (empty: unweighted)
         self.cache: dict[str, dict] = {}       # per-record column caches ("lowpass", "arm")
         self.signatures: dict | None = None    # equation -> content keys of its columns
+        # a measured record (False: a simulated run prepared like one, whose positions hold
+        # no encoder noise; effects.CoulombFriction.regressors)
+        self.measured: bool = True
 
     def copy(self) -> "Signals":
         """A shallow copy sharing the weights and caches (effects transform copies)."""
         out = Signals(self)
         out.weights, out.cache, out.signatures = self.weights, self.cache, self.signatures
+        out.measured = self.measured
         return out
 
 

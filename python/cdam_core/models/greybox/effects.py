@@ -126,52 +126,56 @@ class CoulombFriction(Effect):
     def regressors(self, s, model):
         v = s[model.viscous[self.channel][1]]
         col = smooth_sign(v, self.eps)
-        if self.rest_speed > 0 and isinstance(s, Signals):
-            # On a measured record the rows at rest (velocity within the encoder noise's reach
-            # of zero) hold the sign of that noise, not a direction of motion: it is 0 there.
-            # The rows themselves are left out of the fit (moving_rows), but the parallel
-            # low-pass (estimation.design) carries the column into the rows kept beside a
-            # stop, where the noise's sign is correlated with the velocity column's own noise:
-            # measured on the independent generator's axis with long stops (Fc 3, 8192
-            # counts, 500 Hz, seed 2, IDIM-LS with the Coulomb term, rows at rest and beside
-            # stops left out) Fv +8.2 %, Fc -0.9 %; with the noise's sign 0 at rest Fv -0.1 %,
-            # Fc -0.0 %. A simulated state (a plain dict: the free run, the windows) keeps
-            # the sign: it has no encoder noise and its friction must act at every speed.
-            col = np.where(self._rest(s, model), 0.0, col)
+        if self.rest_speed > 0 and isinstance(s, Signals) and s.measured:
+            # On a measured record the rows at rest (the velocity within the encoder noise's
+            # reach of zero, ``rest_speed``) hold the sign of that noise, not a direction of
+            # motion: the column is 0 there. The rows are left out of the fit (moving_rows),
+            # but the parallel low-pass (estimation.design) carries the column into the rows
+            # kept beside them, where the noise's sign is correlated with the velocity
+            # column's own noise: measured on the independent generator's axis with long stops
+            # (Fc 3, 8192 counts, 500 Hz, seed 2, IDIM-LS with the Coulomb term, rows at rest
+            # and beside stops left out) Fv +7.6 %, Fc -0.8 %; with the sign 0 at rest Fv
+            # -0.9 %, Fc +0.1 %. A simulated trajectory (a state dict, or a prepared run with
+            # ``measured`` false) keeps the sign: it has no encoder noise, and its friction
+            # acts at every speed.
+            col = np.where(self._stops(s, model)[0], 0.0, col)
         return {self.channel: {_p(self, "Fc"): col}}
 
     def bounds(self) -> dict:
         return {_p(self, "Fc"): (0.0, float("inf"))}   # dry friction opposes the motion
 
-    def _rest(self, s, model) -> np.ndarray:
-        """The rows whose velocity is within ``rest_speed`` of zero."""
-        return np.abs(np.asarray(s[model.viscous[self.channel][1]], dtype=float)) <= self.rest_speed
+    def _stops(self, s, model) -> tuple[np.ndarray, list]:
+        """(rows at rest, the stops ``[[start, end), ...]``). At rest: the velocity within
+        ``rest_speed`` of zero. Stops: only those the filter resolves, runs at rest (joined
+        across moving gaps shorter than the main lobe, which the filter does not resolve
+        either: the noise of a quantised velocity crossing the rest level inside a stop) longer
+        than the main lobe's half-width ``rest_reach``; a shorter run is, at the filter's
+        resolution, the velocity crossing zero (the equation holds on both sides, only the run
+        itself is left out). Without a reach every run at rest is a stop."""
+        rest = np.abs(np.asarray(s[model.viscous[self.channel][1]], dtype=float)) <= self.rest_speed
+        reach = int(self.rest_reach)
+        edge = np.diff(np.r_[0, rest.astype(np.int8), 0])
+        start, end = np.flatnonzero(edge == 1), np.flatnonzero(edge == -1)
+        runs = []
+        for a, b in zip(start, end):
+            if runs and a - runs[-1][1] <= 2 * reach:
+                runs[-1][1] = b
+            else:
+                runs.append([a, b])
+        return rest, [r for r in runs if r[1] - r[0] > reach]
 
     def moving_rows(self, s, model) -> np.ndarray | None:
-        """Rows the fit may use (None: all): away from rest, see ``rest_speed``."""
+        """Rows the fit may use (None: all): away from rest and from the stops by the filter's
+        main lobe, see ``rest_speed``, ``rest_reach`` and ``_stops``."""
         if self.rest_speed <= 0:
             return None
-        rest = self._rest(s, model)
+        rest, stops = self._stops(s, model)
         reach = int(self.rest_reach)
-        if reach > 0 and rest.any():
-            # only stops the filter resolves: runs at rest (joined across moving gaps shorter
-            # than the main lobe, which the filter does not resolve either: the noise of a
-            # quantised velocity crossing the rest level inside a stop) longer than the main
-            # lobe's half-width; a shorter run is, at the filter's resolution, the velocity
-            # crossing zero (the equation holds on both sides, only the run itself is left out)
-            edge = np.diff(np.r_[0, rest.astype(np.int8), 0])
-            start, end = np.flatnonzero(edge == 1), np.flatnonzero(edge == -1)
-            runs = []
-            for a, b in zip(start, end):
-                if runs and a - runs[-1][1] <= 2 * reach:
-                    runs[-1][1] = b
-                else:
-                    runs.append([a, b])
+        if reach > 0 and stops:
             stop = np.zeros(rest.size + 1)
-            for a, b in runs:
-                if b - a > reach:
-                    stop[max(a - reach, 0)] += 1
-                    stop[min(b + reach, rest.size)] -= 1
+            for a, b in stops:
+                stop[max(a - reach, 0)] += 1
+                stop[min(b + reach, rest.size)] -= 1
             rest = rest | (np.cumsum(stop[:-1]) > 0)
         return ~rest
 
