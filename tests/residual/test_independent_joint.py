@@ -313,12 +313,28 @@ def test_dry_and_viscous_friction_of_the_readme_joint_within_2_percent(seed):
     assert sel.final.theta["coulomb_friction@tau_m.Fc"] == pytest.approx(0.03, rel=0.02)
 
 
+def test_readme_joint_dry_friction_decided_on_the_chosen_estimators_fold_fits():
+    """Seed 6 of the README's joint: with the structures compared on IDIM-LS fold fits the
+    motor's dry friction predicted the held-out windows better at p 0.027 only (the windows'
+    error is mostly IDIM-LS's errors-in-variables bias), above the level 0.01: no friction
+    found, Dm +27 % (the viscous term took it). Compared on the fold fits of the estimator the
+    windows choose for the declared model (output error there) it is found at p 3e-9.
+    Expected values: the generator's truth, friction on the motor equation and Fc, Dm within
+    5 % (the issue's bound). (About 18 s.)"""
+    r, sel = _readme_joint(6)
+    assert sel.settings["structures_compared_by"]["chosen"] == "output error (multiple shooting)"
+    assert ("coulomb_friction", "tau_m") in _found(sel)
+    assert sel.final.theta["coulomb_friction@tau_m.Fc"] == pytest.approx(0.03, rel=0.05)
+    assert sel.final.theta["Dm"] == pytest.approx(r["truth"]["Dm"], rel=0.05)
+
+
 @pytest.mark.parametrize("seed", [0, 2])
 def test_sigmas_of_the_readme_joint_match_the_spread_over_seeds(seed):
     """The output-error estimate's relative sigmas (the joint problem's sandwich, each window's
     state projected out: output_error.joint_covariance) against the spread of the estimate
     over records. Measured (session 12) on this record, seeds 0-19 less 6, 7 and 15 (6 and 15
-    find no dry friction; seed 7's windows are fitted 10 % better at its estimate, Fc -9.8 %,
+    found no dry friction before the structures were compared on the chosen estimator's fold
+    fits; with them, 19 seeds less 7: Fc 0.77 %, Dm 0.30 %; seed 7's windows are fitted 10 % better at its estimate, Fc -9.8 %,
     than at the truth), the errors' standard deviation over the 17 seeds: Fc 0.81 %, Dm
     0.30 % (uncertain by about 18 %); the mean sigmas Fc 0.76 %, Dm 0.31 %.
     A sigma within a factor 3 of that spread either way; session 11's sigmas (the nested
