@@ -334,8 +334,9 @@ def test_sigmas_of_the_readme_joint_match_the_spread_over_seeds(seed):
     state projected out: output_error.joint_covariance) against the spread of the estimate
     over records. Measured (session 12) on this record, seeds 0-19 less 6, 7 and 15 (6 and 15
     found no dry friction before the structures were compared on the chosen estimator's fold
-    fits; with them, 19 seeds less 7: Fc 0.77 %, Dm 0.30 %; seed 7's windows are fitted 10 % better at its estimate, Fc -9.8 %,
-    than at the truth), the errors' standard deviation over the 17 seeds: Fc 0.81 %, Dm
+    fits; with them and the Coulomb sign 0 at rest, 19 seeds less 7: Fc 0.87 %, Dm 0.33 %;
+    seed 7's windows are fitted 10 % better at its estimate, Fc -9.8 %, than at the
+    truth), the errors' standard deviation over the 17 seeds: Fc 0.81 %, Dm
     0.30 % (uncertain by about 18 %); the mean sigmas Fc 0.76 %, Dm 0.31 %.
     A sigma within a factor 3 of that spread either way; session 11's sigmas (the nested
     state fit's sensitivities) were Fc 6.0 %, Dm 1.9 % on seed 0. The analysis is shared with

@@ -255,6 +255,11 @@ def write_report(sel: Selection, out_dir, title: str | None = None, source: str 
     if dropped:
         lines += ["", "Declared terms the held-out data do not support (fixed at 0): "
                   + ", ".join(f"{d['term']} (p {d['p_value']:.2g})" for d in dropped) + "."]
+    cmp = sel.settings.get("structures_compared_by") or {}
+    if cmp.get("validation"):
+        lines += ["", f"Structures (effects added, the backward pass) compared on held-out "
+                      f"windows by their {cmp['chosen']} fold fits, the estimator the windows "
+                      "choose for the declared model."]
     est = sel.settings.get("estimator") or {}
     if est.get("validation"):
         alts = "; ".join(f"{name}: mean error {v['score_rich']:.3g} against IDIM-LS's "

@@ -39,13 +39,13 @@ multiples of a first pass's sigma (1/4 to 4), per parameter the median sigma; a 
 (the optimiser's, or one sigma) left one parameter of a record 40-65 % off the others now
 and then (README joint: Fc seed 2 0.27 % at the optimiser's step against 0.79-0.81 % at
 1/4-4 sigma; Kd seed 4 0.14 % at one sigma against 0.24 % at the others): a friction switch
-crossed by that step's difference. Measured (session 12) on the README's joint, seeds 0-19
-of the independent generator less 6, 7 and 15 (17 records, so each spread is uncertain by
-about 18 %; seeds 6 and 15 found no dry friction then, with the structures compared on
-IDIM-LS fold fits, and find it since within 0.5 %, selection.structure_estimator: over the 19
-seeds less 7 Fc 0.76 / 0.77 %, Dm 0.31 / 0.30 %; seed 7's windows are fitted 10 % better at
-its estimate, Fc -9.8 %, than at the truth), mean relative sigma against the spread of the
-errors over the seeds: Im 0.026 / 0.056 %, Dm 0.31 / 0.30 %, Ks 0.020 / 0.021 %, Kd 0.23 /
+crossed by that step's difference. Measured (session 12) on the README's joint, seeds 0-19 of
+the independent generator less 6, 7 and 15 (17 records, so each spread is uncertain by about
+18 %; seeds 6 and 15 found no dry friction then, with the structures compared on IDIM-LS fold
+fits, and find it since within 0.5 %, selection.structure_estimator: over the 19 seeds less 7, with
+the Coulomb sign 0 at rest, Fc 0.77 / 0.87 %, Dm 0.32 / 0.33 %; seed 7's windows are fitted 10 %
+better at its estimate, Fc -9.8 %, than at the truth), mean relative sigma against the spread of
+the errors over the seeds: Im 0.026 / 0.056 %, Dm 0.31 / 0.30 %, Ks 0.020 / 0.021 %, Kd 0.23 /
 0.20 %, Fc 0.76 / 0.81 %, I 0.018 / 0.020 %, Dl 0.116 / 0.120 %, G 0.056 / 0.057 % (ratios
 0.88-1.18, Im 0.47). Im's spread is mostly the rollout the loop chooses per seed: +0.07 % on
 average on the 7 seeds whose windows hold the friction's sign, -0.02 % on the 10 that

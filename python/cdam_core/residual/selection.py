@@ -13,7 +13,8 @@ until the residual is white (Ljung-Box) or nothing predicts better. A backward p
 re-tests every claimed effect with all the others present and drops those no longer better
 (``Selection.removed``). Both compare structures by their fold fits under the estimator the
 held-out windows choose for the declared model (:func:`structure_estimator`; IDIM-LS when the
-estimator is given or the windows score equation error). Structure left over (spectral peaks) is reported as ``unexplained``.
+estimator is given or the windows score equation error). Structure left over (spectral
+peaks) is reported as ``unexplained``.
 
 Without held-out blocks no effect is claimed (:func:`select`, "too short to decide"): no share
 of the in-sample residual an effect removes is a valid substitute (a fixed gate, 1 % or 5 %,
