@@ -161,10 +161,15 @@ def main(argv=None) -> int:
 
     def ticker(what):                             # the seconds elapsed, on a terminal only
         return elapsed_ticker(a, what)
+    from threadpoolctl import threadpool_limits
+
     from cdam_core.cli.main import report_failure
     try:
-        path = emps_report(a.out_dir, ticker) if a.example == "emps" else \
-            flight_report(a.out_dir, ticker=ticker)
+        # numpy's BLAS on one thread, as `cdam residual` runs the same loop: the committed
+        # reports then read the same at any BLAS thread count (its reductions' order)
+        with threadpool_limits(1, user_api="blas"):
+            path = emps_report(a.out_dir, ticker) if a.example == "emps" else \
+                flight_report(a.out_dir, ticker=ticker)
     except (Exception, KeyboardInterrupt) as exc:   # one line and an exit code, as `cdam`
         return report_failure(f"cdam {a.command}", exc)
     print(f"wrote {path}")
