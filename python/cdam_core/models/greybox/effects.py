@@ -138,11 +138,16 @@ class CoulombFriction(Effect):
             # -0.9 %, Fc +0.1 %. A simulated trajectory (a state dict, or a prepared run with
             # ``measured`` false) keeps the sign: it has no encoder noise, and its friction
             # acts at every speed.
-            col = np.where(self._stops(s, model)[0], 0.0, col)
+            col = np.where(self._rest(s, model), 0.0, col)
         return {self.channel: {_p(self, "Fc"): col}}
 
     def bounds(self) -> dict:
         return {_p(self, "Fc"): (0.0, float("inf"))}   # dry friction opposes the motion
+
+    def _rest(self, s, model) -> np.ndarray:
+        """Rows at rest: the velocity within ``rest_speed`` of zero."""
+        return np.abs(np.asarray(s[model.viscous[self.channel][1]], dtype=float)) \
+            <= self.rest_speed
 
     def _stops(self, s, model) -> tuple[np.ndarray, list]:
         """(rows at rest, the stops ``[[start, end), ...]``). At rest: the velocity within
@@ -152,7 +157,7 @@ class CoulombFriction(Effect):
         than the main lobe's half-width ``rest_reach``; a shorter run is, at the filter's
         resolution, the velocity crossing zero (the equation holds on both sides, only the run
         itself is left out). Without a reach every run at rest is a stop."""
-        rest = np.abs(np.asarray(s[model.viscous[self.channel][1]], dtype=float)) <= self.rest_speed
+        rest = self._rest(s, model)
         reach = int(self.rest_reach)
         edge = np.diff(np.r_[0, rest.astype(np.int8), 0])
         start, end = np.flatnonzero(edge == 1), np.flatnonzero(edge == -1)
