@@ -142,6 +142,21 @@ def test_no_unexplained_structure_without_a_disturbance(name):
     assert sel.unexplained == [], sel.unexplained
 
 
+def test_no_unexplained_line_from_a_noisy_link_encoder():
+    """A noisy link encoder (1 mrad white noise, 1 kHz, open loop, no disturbance): below the
+    link's derivative cut-off (8.8 Hz chosen here) the link equation's residual is mostly
+    the twice-differentiated noise, rising as f^4. Against the plain lower quartile of the
+    neighbouring bins that slope passed as a line at 4.62 Hz (seed 0; 4.83 Hz on seed 2, 6.02
+    on seed 3 of the four tried), reported as an unexplained periodic disturbance; against the
+    background detrended by its local power law, none (seed 3's 6.02 Hz line stays). The
+    estimator by default, as users run it (about 15 s)."""
+    r = Joint(fs=1000, motor_noise=5e-5, link_noise=1e-3, seed=0).record()
+    sel = analyse("flexible_joint", r["t"], {k: r[k] for k in ("tau_m", "theta_m", "q")},
+                  free_run=False)
+    assert sel.unexplained == [], sel.unexplained
+    assert _found(sel) == set()
+
+
 def test_coarse_encoder_gets_a_lower_cutoff():
     cut = _run("vertical_motor_pd_500_coarse_link")[1].settings["filter_choice"]["chosen_hz"]
     fine = _run("horizontal_open_1k")[1].settings["filter_choice"]["chosen_hz"]
