@@ -299,6 +299,27 @@ def test_rigid_axis_with_long_stops(Fc, seed):
     assert sel.final.theta["coulomb_friction@tau.Fc"] == pytest.approx(Fc, rel=0.05)
 
 
+def test_dry_friction_kept_when_the_comparisons_estimator_fails_on_it():
+    """A heavy axis with large dry friction (M 2, Fv 1, Fc 2 against the multisine torque: a
+    third of the record stuck), the cut-off given (10 Hz, where the noise-free motion's
+    spectrum meets the encoder's white level). IDIM-IV, the estimator the held-out windows
+    choose for the declared model, could not fit the Coulomb structure on one fold (Fv out of
+    its bounds); the structure then lost by default and the viscous term took the friction
+    (Fv +744 %, measured). Compared by IDIM-LS fold fits instead (validation.BlockedCV.compare)
+    the Coulomb term is found on the force equation and M comes within 5 % (measured +2.4 %).
+    Still open, not asserted: Fv +239 % and Fc -28 % there (the stops' rows), and with the
+    cut-off chosen from the record (95 Hz: the quantisation's tones while the axis creeps,
+    cutoff.py's known limit) M -95 % and no friction found. Expected values: the
+    generator's truth."""
+    r = rigid_axis(M=2.0, Fv=1.0, Fc=2.0, counts=16384, seed=0)
+    sel = analyse("rigid_axis", r["t"], {"tau": r["tau"], "q": r["q"]}, free_run=False,
+                  cutoff_hz=10.0)
+    assert ("coulomb_friction", "tau") in _found(sel)
+    step = next(s for s in sel.steps if s.candidate.effect.name == "coulomb_friction")
+    assert "compared_by_idim_ls_because" in step.evidence["validation"]
+    assert sel.final.theta["M"] == pytest.approx(2.0, rel=0.05)
+
+
 @lru_cache(maxsize=None)
 def _readme_joint(seed):
     """The README's joint (vertical plane, motor PD at 500 Hz, 4096-count noisy link encoder,
