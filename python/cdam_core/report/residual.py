@@ -257,9 +257,12 @@ def write_report(sel: Selection, out_dir, title: str | None = None, source: str 
                   + ", ".join(f"{d['term']} (p {d['p_value']:.2g})" for d in dropped) + "."]
     cmp = sel.settings.get("structures_compared_by") or {}
     if cmp.get("validation"):
+        both = "" if cmp["chosen"] == "IDIM-LS" else (
+            " and by their IDIM-LS fold fits (two routes, each at half the level: a structure "
+            "is better if either says so)")
         lines += ["", f"Structures (effects added, the backward pass) compared on held-out "
                       f"windows by their {cmp['chosen']} fold fits, the estimator the windows "
-                      "choose for the declared model."]
+                      f"choose for the declared model{both}."]
     est = sel.settings.get("estimator") or {}
     if est.get("validation"):
         alts = "; ".join(f"{name}: mean error {v['score_rich']:.3g} against IDIM-LS's "

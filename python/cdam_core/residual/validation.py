@@ -124,6 +124,8 @@ class Comparison:
     alpha: float
     reason: str = ""        # why a structure could not be scored, if so
     fallback: str = ""      # the estimator asked for failed: both compared by IDIM-LS, why
+    route: str = ""         # the fold fits this comparison used, when there were two routes
+    other_route: dict | None = None    # the other route's comparison (to_json)
 
     @property
     def better(self) -> bool:
@@ -134,7 +136,9 @@ class Comparison:
                 "score_simple": self.score_simple, "score_rich": self.score_rich,
                 "structures_tried": self.tested, "level": self.alpha / max(self.tested, 1),
                 "better": self.better, **({"reason": self.reason} if self.reason else {}),
-                **({"compared_by_idim_ls_because": self.fallback} if self.fallback else {})}
+                **({"compared_by_idim_ls_because": self.fallback} if self.fallback else {}),
+                **({"route": self.route, "other_route": self.other_route}
+                   if self.route else {})}
 
 
 def paired(e0, e1, tested: int, alpha: float, reason0: str = "",
