@@ -13,8 +13,9 @@ until the residual is white (Ljung-Box) or nothing predicts better. A backward p
 re-tests every claimed effect with all the others present and drops those no longer better
 (``Selection.removed``). Both compare structures by their fold fits under the estimator the
 held-out windows choose for the declared model (:func:`structure_estimator`; IDIM-LS when the
-estimator is given or the windows score equation error). Structure left over (spectral
-peaks) is reported as ``unexplained``.
+estimator is given or the windows score equation error) and, when that is not IDIM-LS, by
+their IDIM-LS fold fits too, each route at half the level (:func:`compare_structures`).
+Structure left over (spectral peaks) is reported as ``unexplained``.
 
 Without held-out blocks no effect is claimed (:func:`select`, "too short to decide"): no share
 of the in-sample residual an effect removes is a valid substitute (a fixed gate, 1 % or 5 %,
@@ -394,9 +395,8 @@ def compare_structures(cv, simple, rich, by: str, tested: int, alpha: float):
     if a.fallback:       # that estimator could not be run: IDIM-LS only (compare's fallback)
         return a
     b = cv.compare((*simple, "idim"), (*rich, "idim"), 2 * tested, alpha)
-    first, other = (a, b) if a.p_value <= b.p_value else (b, a)
-    first.route = ESTIMATORS.get(by, by) if first is a else "IDIM-LS"
-    other.route = ESTIMATORS.get(by, by) if other is a else "IDIM-LS"
+    a.route, b.route = ESTIMATORS.get(by, by), "IDIM-LS"
+    first, other = sorted((a, b), key=lambda c: c.p_value)     # stable: ``by`` on a tie
     first.other_route = other.to_json()
     return first
 
