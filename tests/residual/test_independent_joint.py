@@ -33,6 +33,15 @@ CONDITIONS = {
     "vertical_open_1k_periodic": Joint(plane="vertical", periodic=(0.05, 2.35)),
     # the torque a continuous signal sampled at each instant (a measured current), no hold
     "horizontal_open_1k_continuous": Joint(hold=False),
+    # a hardening cable under motor PD, seen through a 4096-count noisy link encoder
+    "horizontal_motor_pd_500_coarse_link_hardening": Joint(K3=400.0, fs=500, control="motor",
+                                                           link_counts=4096, link_noise=2e-4,
+                                                           motor_counts=16384),
+    # the link under PD at 250 Hz with a disturbance at 3.7 Hz (0.6 Hz from the nearest
+    # excitation line): the link's derivative cut-off gives 1.4 Hz Welch bins to the peak search
+    "vertical_link_pd_250_periodic": Joint(fs=250, control="link", plane="vertical",
+                                           periodic=(0.05, 3.7), motor_counts=16384,
+                                           link_counts=16384),
     # a joint far stiffer than the encoders resolve, the link encoder latched 2 ms early
     "rigid_joint_with_skew": Joint(params={**TRUTH, "Ks": 1e5}, skew=0.002, motor_counts=16384,
                                    link_counts=16384),
@@ -126,6 +135,35 @@ def test_periodic_disturbance_reported_with_its_frequency():
     # model's (measured: 7 of them, each within what the input-driven terms produce)
     assert len(sel.unexplained) == 1, sel.unexplained
     assert sel.settings["residual_structure_explained_by_the_model"]["explained"]
+
+
+def test_hardening_cable_screened_on_the_clean_equation():
+    """Under motor PD the cable deflects 20 mrad RMS, so its cubic term is 1 % of the cable
+    torque; the link equation is mostly the 4096-count encoder's differentiated noise. The
+    screen's F-test pooled both equations (p 0.053: never tried on held-out windows, seeds 0-2,
+    Ks +1 % absorbing it); per equation the motor's says p 4e-22 and the held-out windows then
+    keep it (p < 1e-5). K3 itself (not among the issue's well-excited parameters) comes out
+    -18 % by IDIM-LS, pinned here, on this seed; by the default estimator (output error)
+    +2.9 / +1.6 / -0.2 % on seeds 0-2."""
+    r, sel = _run("horizontal_motor_pd_500_coarse_link_hardening")
+    assert _found(sel) == {("hardening_stiffness", "tau_l")}
+    for p in WELL_EXCITED + ("Dm",):
+        assert sel.final.theta[p] == pytest.approx(r["truth"][p], rel=0.05), p
+
+
+def test_a_disturbance_is_one_finding_not_a_line_and_a_peak():
+    """Under link PD at 250 Hz the peak search's segments (0.7 s: 1.4 Hz bins) show the 3.7 Hz
+    line as a spectral peak at 4.39 Hz, which was reported as a second unexplained finding
+    (seeds 0-2, before). With the line's sinusoid taken out the peak is gone: it is reported on
+    the line, and the disturbance is one finding at its frequency (measured 3.701 Hz)."""
+    r, sel = _run("vertical_link_pd_250_periodic")
+    assert len(sel.unexplained) == 1, sel.unexplained
+    line = sel.unexplained[0]
+    assert line["kind"] == "periodic_line" and line["channel"] == "tau_l"
+    assert abs(line["frequency_hz"] - 3.7) <= 0.2
+    assert line["amplitude"] == pytest.approx(0.05, rel=0.2)
+    assert [abs(f - 3.7) < 1.5 for f in line["seen_as_spectral_peak_hz"]] == [True]
+    assert _found(sel) == set()
 
 
 @pytest.mark.parametrize("name", ["horizontal_open_1k", "vertical_motor_pd_500_coarse_link",
@@ -287,10 +325,12 @@ def test_iv_corrects_least_squares_under_a_too_high_cutoff():
     I -0.1 %, Dl +2.8 %; with IDIM-IV's own windows by RK4 too, session 8: Im +2.1 %,
     Ks -0.2 %, I +0.2 %, Dl +2.7 %). Output error predicts them better than IDIM-LS too, but
     not better than IDIM-IV (measured p 0.11; p 0.052 with output error on every window
-    sample), so IDIM-IV is kept."""
+    sample), so IDIM-IV is kept. The structure is the declared one (``max_steps=0``): the
+    estimators are compared on the same model (the search finds the motor's dry friction since
+    the screen tests each equation apart: the next test)."""
     r = _record("horizontal_link_pd_250_dry_friction")
     sel = analyse("flexible_joint", r["t"], {k: r[k] for k in ("tau_m", "theta_m", "q")},
-                  free_run=False, cutoff_hz=60.0)
+                  free_run=False, cutoff_hz=60.0, max_steps=0)
     est = sel.settings["estimator"]
     assert est["chosen"] == "IDIM-IV", est
     assert est["validation"]["IDIM-IV"]["better"]
@@ -300,6 +340,21 @@ def test_iv_corrects_least_squares_under_a_too_high_cutoff():
     for p in ("Im", "Ks", "I", "Dl"):
         assert sel.final.theta[p] == pytest.approx(r["truth"][p], rel=0.05), p
     assert est["iv"]["converged"]
+
+
+def test_dry_friction_found_under_a_too_high_cutoff():
+    """The same record and cut-off with the effect search: the motor's dry friction (0.05 N m)
+    was not found (the screen's F-test pooled the motor equation with the link's, noise at a
+    60 Hz cut-off: nothing tried on held-out windows; Dm +90 % took the friction); tested per
+    equation it is screened, kept on held-out windows, and every parameter lands within 5 %
+    (measured: Fc -0.14 %, Dm +0.2 %, the others within 0.03 %, output error chosen)."""
+    r = _record("horizontal_link_pd_250_dry_friction")
+    sel = analyse("flexible_joint", r["t"], {k: r[k] for k in ("tau_m", "theta_m", "q")},
+                  free_run=False, cutoff_hz=60.0)
+    assert _found(sel) == {("coulomb_friction", "tau_m")}
+    assert sel.final.theta["coulomb_friction@tau_m.Fc"] == pytest.approx(0.05, rel=0.05)
+    for p in WELL_EXCITED + ("Dm",):
+        assert sel.final.theta[p] == pytest.approx(r["truth"][p], rel=0.05), p
 
 
 def test_output_error_chosen_where_least_squares_is_biased():

@@ -11,6 +11,7 @@ records up to 2,000 samples and the flexible joint's identifiability regression.
 from __future__ import annotations
 
 import numpy as np
+from scipy import optimize
 from scipy import signal as sps
 from scipy import stats
 from scipy.stats import chi2
@@ -210,6 +211,45 @@ def spectral_lines(r, fs: float, alpha: float = 0.01, fmin: float = 0.0,
                     "ratio_to_background": float(ratio[i]), "p_value": float(pv[i]),
                     "resolution_hz": df})
     return sorted(out, key=lambda d: -d["ratio_to_background"])
+
+
+def remove_lines(r, fs: float, lines) -> tuple[np.ndarray, list[float]]:
+    """``r`` with the sinusoids of ``lines`` (dicts of :func:`spectral_lines`: frequency and
+    resolution) taken out, and the frequencies used.
+
+    Each frequency is first refined to the peak of the record's periodogram (on an 8x
+    zero-padded grid within +-1 resolution of the line, then between its neighbours), the frequency a sinusoid's least-squares fit
+    would choose; then one least-squares fit of a cosine and a sine at every refined frequency
+    (and the mean) is subtracted. A frequency off by 0.003 Hz over a 20 s record would leave a
+    tenth of the sinusoid (its phase drifting by 0.38 rad); the refined one leaves the noise's
+    share at that frequency."""
+    r = as_signal(r, "r")
+    fs = positive(fs, "fs")
+    n = r.size
+    t = np.arange(n) / fs
+    x = r - r.mean()
+    nfft = 8 * int(2 ** np.ceil(np.log2(n)))
+    F = np.fft.rfftfreq(nfft, 1.0 / fs)
+    P = np.abs(np.fft.rfft(x, nfft)) ** 2
+    used = []
+    for ln in lines:
+        f0, res = float(ln["frequency_hz"]), float(ln.get("resolution_hz", 4.0 * fs / n))
+        m = np.flatnonzero(np.abs(F - f0) <= res)
+        if m.size:                     # the grid's peak, then the continuous maximum near it
+            g, step = float(F[m[np.argmax(P[m])]]), float(F[1] - F[0])
+            f0 = float(optimize.minimize_scalar(
+                lambda f: -abs(np.dot(x, np.exp(-2j * np.pi * f * t))) ** 2,
+                bounds=(g - step, g + step), method="bounded",
+                options={"xatol": 1e-6 * step}).x)
+        used.append(f0)
+    if not used:
+        return r.copy(), used
+    cols = [np.ones(n)]
+    for f in used:
+        cols += [np.cos(2 * np.pi * f * t), np.sin(2 * np.pi * f * t)]
+    A = np.column_stack(cols)
+    coef = np.linalg.lstsq(A, r, rcond=None)[0]
+    return r - A[:, 1:] @ coef[1:], used
 
 
 def _band_share(f, p, f0, w):
