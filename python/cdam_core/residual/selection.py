@@ -7,9 +7,9 @@ added parameters at level ``alpha`` on the effective sample size N_eff = N / tau
 candidate model's residual (diagnostics.effective_sample_size), per equation the candidate
 changes, the smallest p-value times their number (so a small joint-torque equation is not
 drowned in the force equations of a flight model, nor a clean motor equation in a link equation
-of differentiated encoder noise). The decision is taken on held-out time blocks (:mod:`cdam_core.residual.validation`):
-the screened candidate that predicts them significantly better (one-sided paired Wilcoxon,
-Bonferroni over the candidates tried) is added, the model is re-estimated, and the loop repeats
+of differentiated encoder noise). The decision is taken on held-out time blocks
+(:mod:`cdam_core.residual.validation`): the screened candidate that predicts them
+significantly better (one-sided paired Wilcoxon, Bonferroni over the candidates tried) is added, the model is re-estimated, and the loop repeats
 until the residual is white (Ljung-Box) or nothing predicts better. A backward pass then
 re-tests every claimed effect with all the others present and drops those no longer better
 (``Selection.removed``). Both compare structures by their fold fits under the estimator the
