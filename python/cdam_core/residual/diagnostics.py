@@ -220,9 +220,9 @@ def remove_lines(r, fs: float, lines) -> tuple[np.ndarray, list[float]]:
     Each frequency is first refined to the peak of the record's periodogram (on an 8x
     zero-padded grid within +-1 resolution of the line, then between its neighbours), the
     frequency a sinusoid's least-squares fit would choose; then one least-squares fit of a
-    cosine and a sine at every refined frequency (and the mean) is subtracted. A frequency off by 0.003 Hz over a 20 s record would leave a
-    tenth of the sinusoid (its phase drifting by 0.38 rad); the refined one leaves the noise's
-    share at that frequency."""
+    cosine and a sine at every refined frequency (and the mean) is subtracted. A frequency off
+    by 0.003 Hz over a 20 s record would leave a tenth of the sinusoid (its phase drifting by
+    0.38 rad); the refined one leaves the noise's share at that frequency."""
     r = as_signal(r, "r")
     fs = positive(fs, "fs")
     n = r.size

@@ -1,22 +1,23 @@
 """Stepwise selection of missing effects (forward, as in FROLS).
 
 Each step fits every applicable candidate on top of the current model and ranks them by the
-error reduction ratio ERR = (SSE_current - SSE_candidate) / y'y (for one added regressor this
-is exactly FROLS's ERR of the orthogonalised regressor) and screens them by an F-test on the
-added parameters at level ``alpha`` on the effective sample size N_eff = N / tau_int of the
-candidate model's residual (diagnostics.effective_sample_size), per equation the candidate
-changes, the smallest p-value times their number (so a small joint-torque equation is not
-drowned in the force equations of a flight model, nor a clean motor equation in a link equation
-of differentiated encoder noise). The decision is taken on held-out time blocks
-(:mod:`cdam_core.residual.validation`): the screened candidate that predicts them
-significantly better (one-sided paired Wilcoxon, Bonferroni over the candidates tried) is added, the model is re-estimated, and the loop repeats
-until the residual is white (Ljung-Box) or nothing predicts better. A backward pass then
-re-tests every claimed effect with all the others present and drops those no longer better
-(``Selection.removed``). Both compare structures by their fold fits under the estimator the
-held-out windows choose for the declared model (:func:`structure_estimator`; IDIM-LS when the
-estimator is given or the windows score equation error) and, when that is not IDIM-LS, by
-their IDIM-LS fold fits too, each route at half the level (:func:`compare_structures`).
-Structure left over (spectral peaks) is reported as ``unexplained``.
+error reduction ratio ERR = (SSE_current - SSE_candidate) / y'y (for one added regressor this is
+exactly FROLS's ERR of the orthogonalised regressor) and screens them by an F-test on the added
+parameters at level ``alpha`` on the effective sample size N_eff = N / tau_int of the candidate
+model's residual (diagnostics.effective_sample_size), per equation the candidate changes, the
+smallest p-value times their number (so a small joint-torque equation is not drowned in the
+force equations of a flight model, nor a clean motor equation in a link equation of
+differentiated encoder noise). The decision is taken on held-out time blocks
+(:mod:`cdam_core.residual.validation`): the screened candidate that predicts them significantly
+better (one-sided paired Wilcoxon, Bonferroni over the candidates tried) is added, the model is
+re-estimated, and the loop repeats until the residual is white (Ljung-Box) or nothing predicts
+better. A backward pass then re-tests every claimed effect with all the others present and drops
+those no longer better (``Selection.removed``). Both compare structures by their fold fits under
+the estimator the held-out windows choose for the declared model (:func:`structure_estimator`;
+IDIM-LS when the estimator is given or the windows score equation error) and, when that is not
+IDIM-LS, by their IDIM-LS fold fits too, each route at half the level
+(:func:`compare_structures`). Structure left over (spectral peaks) is reported as
+``unexplained``.
 
 Without held-out blocks no effect is claimed (:func:`select`, "too short to decide"): no share
 of the in-sample residual an effect removes is a valid substitute (a fixed gate, 1 % or 5 %,
