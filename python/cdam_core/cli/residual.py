@@ -239,8 +239,6 @@ def _summary(js: dict) -> list[str]:
         out.append(f"input timing: {tm['chosen']}" + (f" (p {p:.2g})" if p is not None else ""))
         if tm.get("warning"):
             out.append(f"  warning: {tm['warning']}")
-        if tm.get("warning"):
-            out.append(f"  warning: {tm['warning']}")
     cut = (st.get("filter_choice") or {}).get("chosen_hz")
     if isinstance(cut, dict):
         out.append("derivative cut-offs: " + ", ".join(f"{k} {v:.3g} Hz" for k, v in cut.items()))

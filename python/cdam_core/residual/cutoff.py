@@ -37,18 +37,24 @@ spectrum at the bin. Measured: the heavy axis's cut-offs 7.3 / 21 / 7.8 Hz (seed
 noise of the quantisation's variance on the noise-free motion: 10.3 / 11.2 / 10.7 Hz); DATA_EMPS
 (a 5e-8 m grid, the count changing at nearly every sample) unchanged at 400 Hz.
 
-Known limit (measured, not fixed): white noise added after the quantisation (an analogue
-sensor, or the generator's ``noise``) takes the record off its grid and the white rule alone
-applies: on the generator's axis with long stops (Fc 3, 8192 counts, 1e-4 rad noise, 500 Hz,
-seed 1) bins at 17-23 Hz and 41.5-42 Hz exceed the threshold while the noise-free motion ends
-at 13 Hz; the cut-off is 42 Hz (white noise of the same variance: 9.8 Hz), the
-twice-differentiated angle mostly noise, IDIM-LS's M -35 % (IDIM-IV chosen: M +5 %, Fv +11 %).
+White noise added after the quantisation (an analogue stage, a simulator's sensor model) takes
+the record off its grid; the white rule alone then let the creep's lines through: on the
+generator's heavy axis (as above, 3e-5 rad noise, seed 1) the cut-off was 157 Hz, M +90 %,
+Fv +870 % and no friction found; on its axis with long stops (Fc 3, 8192 counts, 1e-4 rad,
+500 Hz, seed 1) 42 Hz, M +5.2 %, Fv +11 %. When the noise is small against the step (the
+regime where it does not dither the quantisation) and the axis creeps, the grid is found under
+the noise (:func:`noisy_grid`) and the counts read from it give the creep error (where the
+count changes at most samples the quantisation is white, the search's scale is then a third of
+a step or more and the white level holds it): the heavy axis's
+cut-offs are then those of its noise-free counts (7.3 / 21 / 7.8 Hz, seeds 0-2; seed 1 M -1.0 %,
+Fc +0.6 %), the axis with long stops 11.7 / 7.8 / 7.8 Hz (seed 1 M +2.5 %, Fv +6.6 %).
 """
 from __future__ import annotations
 
 from dataclasses import replace
 
 import numpy as np
+from scipy import optimize
 from scipy import signal as sps
 from scipy import stats
 
@@ -56,7 +62,7 @@ from cdam_core.models.greybox.declared import DerivativeFilter, SignalFilters
 from cdam_core.residual.validation import motion_horizon
 
 __all__ = ["at_rest", "choose_cutoff", "creep_error", "edge_trim", "encoder_step", "main_lobe",
-           "noise_cutoff"]
+           "noise_cutoff", "noisy_grid"]
 
 TOP = 0.4            # highest cut-off, x the sampling rate
 FLOOR_BAND = 0.35    # noise level read above this fraction of the sampling rate
@@ -81,6 +87,79 @@ def encoder_step(x) -> float | None:
     k = d / step
     tol = 1e-6 + 8 * np.finfo(float).eps * float(np.max(np.abs(x))) / step
     return step if np.max(np.abs(k - np.round(k))) <= tol else None
+
+
+def _robust_std(v) -> float:
+    """1.4826 x the median absolute deviation: the standard deviation of normal data."""
+    v = np.asarray(v, dtype=float)
+    return float(1.4826 * np.median(np.abs(v - np.median(v))))
+
+
+def noisy_grid(x) -> dict | None:
+    """The grid of an encoder whose counts were read with white noise added after the
+    quantisation (an analogue stage, a simulator's sensor model), or None.
+
+    The search's scale is the noise read independently of any grid from the second differences
+    (robust standard deviation / sqrt 6; an upper bound where count changes are frequent). The
+    step is the period at which the angles' phases concentrate most (the magnitude of the
+    characteristic function of the angles' histogram, FFT on bins of a quarter of that scale,
+    refined on the samples), from 3 x that scale to a tenth of the range moved; of the step
+    and its multiples up to 16 the coarsest grid that concentrates them as much (a finer one
+    holds every point of a coarser one); the offset is their mean phase. Under the grid, the angle minus its nearest grid point is the noise: its
+    level sigma is read there (1.4826 x the median absolute value). The grid is reported only
+    where it matters, a step of at least 6 sigma (below, the noise dithers the quantisation into
+    white noise that the white level already holds), and only when it explains the samples at
+    which the count changes: there the residual is the noise as well (spread sigma, by the same
+    robust measure: the noise's own crossings of half a step are among those samples), where
+    without a grid it is spread over the step (evenly, or near half a step where a slow angle
+    crosses a cell's boundary: a spread of at least 0.37 step, 2.2 sigma), however many samples
+    sit still at a few positions. The spread at the changes must be nearer sigma than 0.37 step
+    in ratio (below their geometric mean; a few hundred changes estimate it to about 6 %)."""
+    x = np.asarray(x, dtype=float)
+    if x.size < 32:
+        return None
+    scale = _robust_std(np.diff(x, 2)) / np.sqrt(6.0)
+    span = float(np.ptp(x))
+    if not scale > 0 or span < 30 * scale:
+        return None
+    h = scale / 4.0
+    bins = int(span / h) + 1
+    if bins > 2 ** 24:
+        return None
+    nfft = 1 << int(np.ceil(np.log2(bins)))
+    hist = np.bincount(((x - x.min()) / h).astype(np.int64), minlength=nfft)
+    mag = np.abs(np.fft.rfft(hist.astype(float))) / x.size
+    u = np.arange(mag.size) / (nfft * h)
+    search = np.flatnonzero((u >= 10.0 / span) & (u <= 1.0 / (3.0 * scale)))
+    if search.size == 0:
+        return None
+    j = int(search[np.argmax(mag[search])])
+    du = 1.0 / (nfft * h)
+    best = optimize.minimize_scalar(lambda f: -abs(np.mean(np.exp(2j * np.pi * f * x))),
+                                    bounds=(max(u[j] - du, du), u[j] + du), method="bounded",
+                                    options={"xatol": du * 1e-4})
+    found = 1.0 / float(best.x)
+    step, z = found, np.mean(np.exp(2j * np.pi * x / found))
+    for m in range(2, 17):    # a harmonic's bin may stand higher (the FFT's scalloping)
+        if m * found > span / 10.0:
+            break
+        zm = np.mean(np.exp(2j * np.pi * x / (m * found)))
+        if abs(zm) >= abs(z):
+            step, z = m * found, zm
+    offset = float(np.angle(z)) * step / (2 * np.pi)
+    c = np.round((x - offset) / step)
+    r = x - offset - step * c
+    sigma = float(1.4826 * np.median(np.abs(r)))
+    moving = np.flatnonzero(np.diff(c) != 0) + 1
+    if moving.size < 10 or not 0 < 6.0 * sigma <= step:
+        return None
+    spread = float(1.4826 * np.median(np.abs(r[moving])))
+    even = 1.4826 * step / 4.0        # the spread of residuals even over the step
+    if spread >= np.sqrt(sigma * even):
+        return None
+    return {"step": step, "offset": offset, "noise_sigma": sigma,
+            "phase_concentration": float(abs(z)), "residual_spread_at_changes": spread,
+            "changes": int(moving.size)}
 
 
 def creep_error(x, step: float) -> np.ndarray:
@@ -119,9 +198,15 @@ def noise_cutoff(x, fs: float, lowest: float = 0.0) -> tuple[float, dict]:
         return top, {"noise_level": 0.0, "reason": "no noise floor in the record"}
     level = float(np.median(P[band])) / (stats.chi2.median(dof) / dof)
     floor = np.full(P.shape, level)
-    step = encoder_step(x)
+    step, grid = encoder_step(x), None
+    counts = x
+    if step is None:          # the counts under white noise added after the quantisation
+        grid = noisy_grid(x)
+        if grid is not None:
+            step = grid["step"]
+            counts = grid["offset"] + step * np.round((x - grid["offset"]) / step)
     if step is not None:      # the quantisation's own spectrum where the axis creeps
-        floor = np.maximum(floor, sps.welch(creep_error(x, step), fs=fs, nperseg=nper,
+        floor = np.maximum(floor, sps.welch(creep_error(counts, step), fs=fs, nperseg=nper,
                                             detrend="linear")[1])
     tested = int(np.count_nonzero(f > 0))
     q = stats.chi2.isf(LEVEL / tested, dof) / dof
@@ -132,6 +217,7 @@ def noise_cutoff(x, fs: float, lowest: float = 0.0) -> tuple[float, dict]:
     return fc, {"noise_level": level, "threshold": thr, "frequencies_tested": tested,
                 "resolution_hz": float(f[1] - f[0]),
                 "encoder_step": step,
+                "noisy_grid": grid,
                 "bins_above_white_by_creep": int(np.count_nonzero(floor > level)),
                 "last_frequency_above_noise_hz": float(f[above[-1]]) if above.size else None}
 
@@ -152,8 +238,9 @@ def choose_cutoff(model, t, raw: dict, extra: dict | None = None, order: int = 4
     trim = edge_trim(min(cut.values()), fs)
     return filt, {"rule": "per position: the highest frequency where its spectrum exceeds the "
                           "encoder's white-noise level (read at 0.35..0.5 fs; on a position "
-                          "on a grid of counts, or its quantisation error's spectrum where "
-                          "that is higher) beyond the "
+                          "on a grid of counts, read exactly or found under white noise, "
+                          "or its quantisation error's spectrum where that is higher) "
+                          "beyond the "
                           f"chi-square quantile at {100 * LEVEL:g} % / the frequencies tested "
                           "(Bonferroni); within "
                           f"[{lowest:.3g}, {TOP * fs:.4g}] Hz",
