@@ -42,6 +42,30 @@ def test_a_missing_effect_loses_on_held_out_windows_and_a_spurious_one_does_not_
     assert not none.better
 
 
+def test_an_estimator_that_cannot_fit_a_structure_does_not_decide_against_it():
+    """When the fold fits of the estimator asked for (here IDIM-IV) cannot be made for one of
+    the structures, that is the estimator's failure, not the structure's: both are compared by
+    their IDIM-LS fold fits and the report says why. The failure is injected (the IV fold fit of
+    the structure with the Coulomb term raises); the comparison must then equal the IDIM-LS
+    comparison of the same structures, which finds the friction the record holds."""
+    rec = rigid_axis(fs=1000.0, duration=10.0, Fc=1.0, noise=1e-5)
+    m, sig = _prepared(rec)
+    c = CoulombFriction("tau")
+
+    class IVFails(BlockedCV):
+        def _fold_model(self, model, effects, estimator, k, U):
+            if estimator == "iv" and effects:
+                raise ValueError("IV fold estimate outside the physical bounds (injected)")
+            return super()._fold_model(model, effects, estimator, k, U)
+
+    v = IVFails(m, sig, trim=50).compare(((), None, "iv"), ((c,), None, "iv"), tested=1,
+                                         alpha=0.01)
+    ls = BlockedCV(m, sig, trim=50).compare(((), None), ((c,), None), tested=1, alpha=0.01)
+    assert "iv fold fits failed" in v.fallback and "injected" in v.fallback
+    assert "compared_by_idim_ls_because" in v.to_json()
+    assert v.p_value == ls.p_value and v.better and ls.better
+
+
 def test_bonferroni_level_is_alpha_over_the_structures_tried():
     rec = rigid_axis(fs=1000.0, duration=10.0, Fc=1.0, noise=1e-5)
     m, sig = _prepared(rec)

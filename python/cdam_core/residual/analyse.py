@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from cdam_core.models.greybox.declared import DerivativeFilter
-from cdam_core.residual.cutoff import at_rest, choose_cutoff
+from cdam_core.residual.cutoff import at_rest, choose_cutoff, given_cutoff
 from cdam_core.residual.identifiability import deflection_check
 from cdam_core.models.greybox.registry import get_model
 from cdam_core.models.greybox.effects import LIBRARY, candidates as library_candidates
@@ -67,11 +67,15 @@ def analyse(model: str, t, signals: dict, extra: dict | None = None, fixed: dict
     choice = {"rule": "given" if cutoff_hz is not None else "the model's default",
               "chosen_hz": cutoff_hz if cutoff_hz is not None else m.default_cutoff_hz}
     trim = None
-    if cutoff_hz is not None or getattr(m, "fixed_bands", False):
+    if getattr(m, "fixed_bands", False):    # the flight models keep their documented bands
         filt = DerivativeFilter(cutoff_hz=choice["chosen_hz"])
-    else:   # chosen from the record (the flight models keep their documented bands)
-        filt, choice = choose_cutoff(m, t, signals, extra)
-        trim = choice["trim_samples"]
+    else:   # given, or chosen from the record; either way the rows at rest are left out
+        if cutoff_hz is not None:
+            filt = DerivativeFilter(cutoff_hz=cutoff_hz)
+            choice = given_cutoff(m, t, signals, cutoff_hz, filt.order)
+        else:
+            filt, choice = choose_cutoff(m, t, signals, extra)
+            trim = choice["trim_samples"]
         cands = at_rest(m, cands, choice, alpha)
         dec = [c for c in cands if c.name in set(declared)]
     if timing == "auto" and getattr(m, "fixed_bands", False):

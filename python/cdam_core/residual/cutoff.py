@@ -61,8 +61,8 @@ from scipy import stats
 from cdam_core.models.greybox.declared import DerivativeFilter, SignalFilters
 from cdam_core.residual.validation import motion_horizon
 
-__all__ = ["at_rest", "choose_cutoff", "creep_error", "edge_trim", "encoder_step", "main_lobe",
-           "noise_cutoff", "noisy_grid"]
+__all__ = ["at_rest", "choose_cutoff", "creep_error", "edge_trim", "encoder_step", "given_cutoff",
+           "main_lobe", "noise_cutoff", "noisy_grid"]
 
 TOP = 0.4            # highest cut-off, x the sampling rate
 FLOOR_BAND = 0.35    # noise level read above this fraction of the sampling rate
@@ -246,6 +246,21 @@ def choose_cutoff(model, t, raw: dict, extra: dict | None = None, order: int = 4
                           f"[{lowest:.3g}, {TOP * fs:.4g}] Hz",
                   "chosen_hz": {p: float(v) for p, v in cut.items()}, "signals": evidence,
                   "trim_samples": trim, "fs": fs, "order": int(order)}
+
+
+def given_cutoff(model, t, raw: dict, cutoff_hz: float, order: int = 4) -> dict:
+    """The report of a cut-off the user gave (one for every position), with each position's
+    noise evidence read as :func:`noise_cutoff` reads it: the rows at rest are then left out
+    of a dry-friction fit (:func:`at_rest`) and the cable's deflection check weighs the encoder
+    noise, as with a chosen cut-off; the cut-off the record would choose is reported beside."""
+    t = np.asarray(t, dtype=float)
+    fs = 1.0 / float(np.mean(np.diff(t)))
+    evidence = {}
+    for p in model.positions:
+        fc, evidence[p] = noise_cutoff(raw[p], fs)
+        evidence[p]["record_would_choose_hz"] = fc
+    return {"rule": "given", "chosen_hz": {p: float(cutoff_hz) for p in model.positions},
+            "signals": evidence, "fs": fs, "order": int(order)}
 
 
 def velocity_noise(noise_level: float, cutoff_hz: float) -> float:

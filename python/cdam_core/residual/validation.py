@@ -472,9 +472,11 @@ class BlockedCV:
         physical bounds, a diverging refinement), that is the estimator's failure, not the
         structure's: both are compared by their IDIM-LS fold fits instead, and the report says
         why (``fallback``). Measured on the independent generator's heavy axis with dry
-        friction (M 2, Fv 1, Fc 2, a third of the record stuck; cut-off given, 10 Hz): IDIM-IV,
-        chosen for the declared model, failed on one fold with the Coulomb term (Fv out of
-        bounds) and the Coulomb term was lost (Fv +744 %, the viscous term took the friction)."""
+        friction (M 2, Fv 1, Fc 2, a third of the record stuck; cut-off given, 10 Hz, its rows at
+        rest then still in the fit): IDIM-IV, chosen for the declared model, failed on one fold
+        with the Coulomb term (Fv out of bounds) and the Coulomb term was lost (Fv +744 %, the
+        viscous term took the friction). Tested with an injected failure
+        (tests/residual/test_validation.py)."""
         e0, r0 = self.scores(*simple)
         e1, r1 = self.scores(*rich)
         asked = {s[2] for s in (simple, rich) if len(s) > 2} - {"idim"}
