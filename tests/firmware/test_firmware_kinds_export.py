@@ -132,9 +132,10 @@ def test_flexible_joint_header(tmp_path):
     assert G0 == LIBRARY_G0
     text = fw.export_header(flexible_file(tmp_path / "fj.json"), tmp_path / "m.hpp").read_text()
     assert "#define CDAM_MODEL_DECLARED 1" in text
-    # Im, Dm, Ks, Kd, I, Dl, G in the declared model's order
+    # Im, Dm, Ks, Kd, I, Dl, G, Gc, offset_m, offset_l in the declared model's order (the file
+    # predates the last three: the model it holds has them at 0)
     np.testing.assert_array_equal(_array(text, "kBase").astype(np.float32),
-                                  np.float32([0.01, 0.1, 20.0, 0.05, 0.02, 0.05, 0.5]))
+                                  np.float32([0.01, 0.1, 20.0, 0.05, 0.02, 0.05, 0.5, 0, 0, 0]))
     # backlash, hardening, coulomb (motor), asymmetric (link), payload, delay (motor input)
     assert re.search(r"kEffectCode\[6\] = \{5, 6, 1, 2, 7, 4\}", text)
     assert re.search(r"kEffectEq\[6\] = \{1, 1, 0, 1, 1, 0\}", text)

@@ -13,6 +13,9 @@ Cable:  tau_l = Ks d + K3 d^3 + Kd d',  d = thm - q
 Link:   I q'' + Dl q' + Fcl tanh(q' / v_s) + G sin q = tau_l + A sin(2 pi f t) + w(t)
 
 (w: an unmeasured link torque given per sample, ``link_torque``; Fcl: link-side dry friction.)
+The angles are measured from encoder zeros that need not be the hanging position (``zero``)
+nor each other's (``motor_zero``: the deflection read with an offset), the torque with an
+offset (``tau_bias``, a current sensor's).
 
 The dry friction uses a steep tanh (v_s = 1 mrad/s) so RK4 stays smooth; the identified model's
 plain sign differs from it only below v_s.
@@ -45,6 +48,9 @@ class Joint:
     periodic: tuple = ()            # (amplitude N m, frequency Hz) on the link
     Fc_link: float = 0.0            # link-side dry friction, N m (steep tanh as the motor's)
     link_torque: tuple = ()         # an unmeasured torque on the link, N m per sample (held)
+    zero: float = 0.0               # rad, the encoders' zero from the hanging position
+    motor_zero: float = 0.0         # rad, the motor encoder's zero off the link encoder's
+    tau_bias: float = 0.0           # N m, the torque measurement's offset (a current sensor's)
     substeps: int = 4
     hold: bool = True               # False (open loop only): a continuous torque, sampled
     seed: int = 0
@@ -94,8 +100,10 @@ class Joint:
         thm_m, q_m = np.zeros(n), np.zeros(n)
         prev = None
         for k in range(n):
-            thm_m[k] = self._measure(x[0], self.motor_counts, self.motor_noise, rng)
-            q_m[k] = self._measure(hist_q[0], self.link_counts, self.link_noise, rng)
+            thm_m[k] = self._measure(x[0] - self.zero - self.motor_zero, self.motor_counts,
+                                     self.motor_noise, rng)
+            q_m[k] = self._measure(hist_q[0] - self.zero, self.link_counts, self.link_noise,
+                                   rng)
             if self.control == "open":
                 u = 0.6 * ref[k]
             else:
@@ -106,8 +114,8 @@ class Joint:
                 kp, kd = (2.0, 0.08) if self.control == "motor" else (1.0, 0.1)
                 u = kp * (r - y) - kd * vel
                 if self.plane == "vertical":
-                    u += self.G * np.sin(r)   # gravity feed-forward on the reference
-            tau[k] = u
+                    u += self.G * np.sin(r + self.zero)   # gravity feed-forward
+            tau[k] = u + self.tau_bias
             for j in range(self.substeps):
                 tk = k * dt + j * h
                 if self.hold:

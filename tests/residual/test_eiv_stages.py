@@ -212,13 +212,15 @@ def test_link_only_effect_below_twenty_percent_is_claimed_on_held_out_blocks():
 
 
 def test_spurious_large_in_sample_gain_on_a_link_equation_is_not_claimed():
-    """A measured column unrelated to the slow torque acting on the link removes over 25 % of
-    the link residual in-sample (a spurious regression of two slowly varying signals); it does
-    not predict held-out blocks, and the selection does not claim it."""
+    """A measured column unrelated to the slow torque acting on the link removes about 25 % of
+    the link residual in-sample, above the 20 % gate the flight model used to apply (a
+    spurious regression of two slowly varying signals; 24.6 % once the declared link equation
+    has its Gc cos q and constant terms); it does not predict held-out blocks, and the
+    selection does not claim it."""
     m, sig = _prepared("spurious")
     assert abs(np.corrcoef(LINK_TORQUE, sig["extra"]["z"])[0, 1]) > 0.5
     eff = ExternalForce(channel="tau_l", column="z")
-    assert _gain(m, sig, eff) > 0.25
+    assert _gain(m, sig, eff) > 0.20
     dec = fit(m, sig, (), TRIM)
     v = BlockedCV(m, sig, TRIM, declared=dec, criterion="equation").compare(
         ((), None), ((eff,), None), 1, 0.01)

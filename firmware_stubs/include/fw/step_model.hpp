@@ -292,21 +292,25 @@ class StepModel {
     e[0] = e[0] - th[1] * v_[0];
     e[0] = e[0] - th[2] * 1.0f;
 #elif CDAM_MODEL_DECLARED == 1
-    // flexible_joint [Im, Dm, Ks, Kd, I, Dl, G], positions (theta_m, q), cable deflection
-    // d = theta_m - q (through a backlash dead band if the model has one), rate dd:
-    //   tau_m: tau_m = Im thm'' + Dm thm' + Ks d + Kd dd
-    //   tau_l: 0 = I q'' + Dl q' + G sin q - Ks d - Kd dd
+    // flexible_joint [Im, Dm, Ks, Kd, I, Dl, G, Gc, offset_m, offset_l], positions
+    // (theta_m, q), cable deflection d = theta_m - q (through a backlash dead band if the
+    // model has one), rate dd:
+    //   tau_m: tau_m = Im thm'' + Dm thm' + Ks d + Kd dd + offset_m
+    //   tau_l: 0 = I q'' + Dl q' + G sin q + Gc cos q - Ks d - Kd dd + offset_l
     const float d = deflection();
     const float dd = v_[0] - v_[1];
     e[0] = u[0];
     e[0] = e[0] - th[1] * v_[0];
     e[0] = e[0] - th[2] * d;
     e[0] = e[0] - th[3] * dd;
+    e[0] = e[0] - th[8] * 1.0f;
     e[1] = 0.0f;
     e[1] = e[1] - th[5] * v_[1];
     e[1] = e[1] - th[6] * std::sin(x_[1]);
+    e[1] = e[1] - th[7] * std::cos(x_[1]);
     e[1] = e[1] - th[2] * -d;
     e[1] = e[1] - th[3] * -dd;
+    e[1] = e[1] - th[9] * 1.0f;
 #elif CDAM_MODEL_DECLARED == 2
     // quadrotor [m, Kx, Ky, Kz, Jx, Jy, Jz, Kphi, Ktheta, Kpsi], positions (phi, theta, psi,
     // X, Y, Z), inputs (T, tau_phi, tau_theta, tau_psi); flight.Quadrotor.equations

@@ -252,11 +252,17 @@ def _summary(js: dict) -> list[str]:
                    + (f" (stick-slip p {p:.2g})" if p is not None else f" ({ss['rule']})"))
     std = js.get("final_std") or {}
     out.append("final parameters (value, relative sigma):")
+    dropped = {d.get("term") for d in st.get("declared_terms_dropped") or ()}
     for k, v in (js.get("final_parameters") or {}).items():
+        if k in dropped:
+            out.append(f"  {k} 0 (dropped: no held-out gain)")
+            continue
         s = std.get(k)
         rel = (f"{100 * abs(s / v):.2g} %" if s is not None and v not in (0, None) and
                math.isfinite(s) else "-")
         out.append(f"  {k} {v:.5g} ({rel})")
+    for k, v in (js.get("derived_parameters") or {}).items():
+        out.append(f"  derived: {k} {v:.5g}")
     for f in js["findings"]:
         out.append(f"found {f['effect']} on {f['channel']}: {f['parameters']}")
     val = st.get("validation") or {}

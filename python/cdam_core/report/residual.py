@@ -22,7 +22,8 @@ def to_json(sel: Selection) -> dict:
     Error dictionaries are keyed by channel: equation channels (``tau``, ``tau_m``, ``tau_l``)
     hold the equation error (nrmse = ||e|| / ||measured torque||), output channels (``q``,
     ``theta_m``) the free-run error (nrmse = rmse / std(measured)). Extra keys:
-    ``declared_parameters``, ``final_parameters``, ``error_final`` (the final model's errors),
+    ``declared_parameters``, ``final_parameters``, ``derived_parameters`` (physical quantities
+    that follow from them: the declared model's ``derived``), ``error_final`` (the final model's errors),
     ``removed_in_backward_pass`` (claims withdrawn when re-tested with all others) and
     ``settings``.
     """
@@ -47,6 +48,7 @@ def to_json(sel: Selection) -> dict:
         "removed_in_backward_pass": sel.removed,
         "declared_parameters": sel.declared.theta,
         "final_parameters": sel.final.theta,
+        "derived_parameters": model.derived(sel.final.theta),
         "declared_std": sel.declared.std,
         "final_std": sel.final.std,
         "feasibility": {k: {"feasible": not f.violations, "violations": f.violations,

@@ -16,7 +16,8 @@ _SIMPLER = {"N s²/m": "kg", "N m s²/rad": "kg m²"}
 _DECLARED = {
     "rigid_axis": {"M": "F s²/X", "Fv": "F s/X", "offset": "F"},
     "flexible_joint": {"Im": "F s²/X", "Dm": "F s/X", "Ks": "F/X", "Kd": "F s/X",
-                       "I": "F s²/X", "Dl": "F s/X", "G": "F"},
+                       "I": "F s²/X", "Dl": "F s/X", "G": "F", "Gc": "F", "offset_m": "F",
+                       "offset_l": "F"},
 }
 _FLIGHT = {"m": "kg", "Kx": "N s/m", "Ky": "N s/m", "Kz": "N s/m", "Jx": "kg m²",
            "Jy": "kg m²", "Jz": "kg m²", "Kphi": "N m s/rad", "Ktheta": "N m s/rad",
@@ -54,7 +55,7 @@ def parameter_unit(model: str, name: str, units: dict | None = None) -> str:
     if "@" not in name:
         template = _DECLARED.get(model, {}).get(name)
         channel = next(iter(pairs), None)
-        if model == "flexible_joint" and name in ("I", "Dl", "G"):
+        if model == "flexible_joint" and name in ("I", "Dl", "G", "Gc", "offset_l"):
             channel = "tau_l"
     else:
         head, _, par = name.partition(".")

@@ -707,6 +707,19 @@ class GreyBox(Model):
         if len(set(names)) != len(names):
             raise ValueError("model.parameters.names: repeated name")
         expected = _parameter_names(m, effects, g)
+        late = sorted((set(m.optional_terms) & expected) - set(names))
+        if late:
+            # a file written before these declared terms existed (the joint's Gc cos q and
+            # constants, session 15): the model it holds is the one with them at 0
+            fixed = {**d["fixed"], **{p: 0.0 for p in late}}
+            g2 = cls(d["declared"], float(d["dt"]), effects, fixed, cut, int(filt["order"]),
+                     d["extra_columns"])
+            m2 = g2._structure()
+            if set(names) | set(late) == _parameter_names(m2, effects, g2):
+                g, m = g2, m2
+                names = list(names) + late
+                values, std = list(values) + [0.0] * len(late), list(std) + [None] * len(late)
+                expected = set(names)
         if set(names) != expected:
             extra = sorted(set(names) - expected)
             missing = sorted(expected - set(names))
