@@ -10,6 +10,7 @@ C (link PD, 250 Hz, dry friction) Im +2.3 %, Ks -0.2 %, I +1.4 %, Dl -0.2 %, Dm 
 With parallel filtering (the torque and the friction's sign column low-passed like the
 differentiated positions): B Im -1.8 %, Dm -3.9 %, I +2.9 %, G +6.1 %; C Dm -4.5 %, Fc -0.2 %.
 """
+import re
 from functools import lru_cache
 
 import numpy as np
@@ -267,6 +268,32 @@ def test_encoders_zeros_off_each_other_under_a_coarse_link_encoder():
     assert abs(der["torque_offset"]) < 0.01
     for p in WELL_EXCITED + ("G",):
         assert sel.final.theta[p] == pytest.approx(r["truth"][p], rel=0.01), p
+
+
+def test_report_reads_the_zero_of_a_joint_measured_off_hanging(tmp_path):
+    """``cdam residual`` on the joint whose encoders' zero is 0.3 rad off the hanging position,
+    with a sidecar giving the units: the JSON's ``derived_parameters`` and the report's page
+    give the zero's angle in rad and the gravity's amplitude in N m. Expected values: the
+    generator's settings (0.3 rad, 0.6 N m)."""
+    import json
+    from cdam_core.cli.main import main
+    r = _record("zero_0.3_off_hanging")
+    np.savetxt(tmp_path / "j.csv", np.column_stack([r["t"], r["tau_m"], r["theta_m"], r["q"]]),
+               delimiter=",", header="t,tau_m1,theta_m1,q1", comments="", fmt="%.10g")
+    (tmp_path / "j.json").write_text(json.dumps(
+        {"inputs": ["tau_m1"], "outputs": ["theta_m1", "q1"],
+         "units": {"tau_m1": "N m", "theta_m1": "rad", "q1": "rad"}}))
+    assert main(["residual", str(tmp_path / "j.csv"), "--model", "flexible_joint",
+                 "--estimator", "idim-ls", "--no-free-run", "--quiet", "--json",
+                 str(tmp_path / "r.json"), "--report", str(tmp_path / "rep")]) == 0
+    der = json.loads((tmp_path / "r.json").read_text())["derived_parameters"]
+    assert der["gravity_zero_rad"] == pytest.approx(0.3, abs=0.01)
+    assert der["gravity_amplitude"] == pytest.approx(0.6, rel=0.02)
+    md = (tmp_path / "rep" / "index.md").read_text()
+    zero = re.search(r"gravity_zero_rad = ([-0-9.e]+) rad", md)
+    amp = re.search(r"gravity_amplitude = ([-0-9.e]+) N m", md)
+    assert zero and float(zero.group(1)) == pytest.approx(0.3, abs=0.01)
+    assert amp and float(amp.group(1)) == pytest.approx(0.6, rel=0.02)
 
 
 def test_coarse_encoder_gets_a_lower_cutoff():

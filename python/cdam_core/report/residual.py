@@ -10,7 +10,7 @@ import numpy as np
 
 from cdam_core.base.jsonio import atomic_target, plain, write_text_atomic
 from cdam_core.report.page import figure, write_page
-from cdam_core.report.units import channel_unit, parameter_unit
+from cdam_core.report.units import channel_unit, derived_unit, parameter_unit
 
 from cdam_core.residual import diagnostics as dg
 from cdam_core.residual.selection import Selection
@@ -257,6 +257,11 @@ def write_report(sel: Selection, out_dir, title: str | None = None, source: str 
     if dropped:
         lines += ["", "Declared terms the held-out data do not support (fixed at 0): "
                   + ", ".join(f"{d['term']} (p {d['p_value']:.2g})" for d in dropped) + "."]
+    derived = js.get("derived_parameters") or {}
+    if derived:
+        lines += ["", "Derived from the final parameters (the model's `derived`): " + ", ".join(
+            f"{k} = {v:.6g}" + (f" {u}" if (u := derived_unit(sel.model.name, k, units)) else "")
+            for k, v in derived.items()) + "."]
     cmp = sel.settings.get("structures_compared_by") or {}
     if cmp.get("validation"):
         both = "" if cmp["chosen"] == "IDIM-LS" else (

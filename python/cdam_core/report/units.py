@@ -8,7 +8,7 @@ A parameter not listed here has its unit left blank in the table rather than gue
 """
 from __future__ import annotations
 
-__all__ = ["parameter_unit", "channel_unit"]
+__all__ = ["parameter_unit", "channel_unit", "derived_unit"]
 
 _SIMPLER = {"N s²/m": "kg", "N m s²/rad": "kg m²"}
 
@@ -30,6 +30,9 @@ _FLIGHT = {"m": "kg", "Kx": "N s/m", "Ky": "N s/m", "Kz": "N s/m", "Jx": "kg m²
 _EFFECT = {"Fc": "F", "dFc": "F", "dFv": "F s/X", "Fc_pos": "F", "Fc_neg": "F",
            "Fv_pos": "F s/X", "Fv_neg": "F s/X", "width": "X", "K3": "F/X³", "delay": "s",
            "mass": "kg", "m": "kg"}
+# derived quantity (the declared model's ``derived``) -> template, on the model's first channel
+_DERIVED = {"flexible_joint": {"gravity_amplitude": "F", "gravity_zero_rad": "X",
+                               "encoder_zero_offset_rad": "X", "torque_offset": "F"}}
 # the (force, coordinate) signal pair of each equation channel
 _PAIRS = {"rigid_axis": {"tau": ("tau", "q")},
           "flexible_joint": {"tau_m": ("tau_m", "theta_m"), "tau_l": ("tau_m", "q")}}
@@ -77,3 +80,12 @@ def channel_unit(model: str, channel: str, units: dict | None = None) -> str:
     units = units or {}
     pair = _PAIRS[model].get(channel)
     return units.get(pair[0] if pair else channel, "")
+
+
+def derived_unit(model: str, name: str, units: dict | None = None) -> str:
+    """The unit of a derived quantity (``"gravity_zero_rad"``) of ``model``; "" when unknown."""
+    template = _DERIVED.get(model, {}).get(name)
+    if template is None:
+        return ""
+    force, coord = next(iter(_PAIRS.get(model, {}).values()), (None, None))
+    return _fill(template, (units or {}).get(force), (units or {}).get(coord))
