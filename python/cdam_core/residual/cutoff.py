@@ -89,10 +89,11 @@ def encoder_step(x) -> float | None:
     return step if np.max(np.abs(k - np.round(k))) <= tol else None
 
 
-def _robust_std(v) -> float:
-    """1.4826 x the median absolute deviation: the standard deviation of normal data."""
+def _robust_std(v, centre: float | None = None) -> float:
+    """1.4826 x the median absolute deviation from ``centre`` (default the median): the
+    standard deviation of normal data."""
     v = np.asarray(v, dtype=float)
-    return float(1.4826 * np.median(np.abs(v - np.median(v))))
+    return float(1.4826 * np.median(np.abs(v - (np.median(v) if centre is None else centre))))
 
 
 def noisy_grid(x) -> dict | None:
@@ -149,11 +150,11 @@ def noisy_grid(x) -> dict | None:
     offset = float(np.angle(z)) * step / (2 * np.pi)
     c = np.round((x - offset) / step)
     r = x - offset - step * c
-    sigma = float(1.4826 * np.median(np.abs(r)))
+    sigma = _robust_std(r, 0.0)
     moving = np.flatnonzero(np.diff(c) != 0) + 1
     if moving.size < 10 or not 0 < 6.0 * sigma <= step:
         return None
-    spread = float(1.4826 * np.median(np.abs(r[moving])))
+    spread = _robust_std(r[moving], 0.0)
     even = 1.4826 * step / 4.0        # the spread of residuals even over the step
     if spread >= np.sqrt(sigma * even):
         return None
