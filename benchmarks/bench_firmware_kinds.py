@@ -35,7 +35,7 @@ def _emps_models(tmp: Path) -> dict:
     """ARX(2, 2, 1) and the residual loop's grey-box model on DATA_EMPS ({} without the data)."""
     import numpy as np
     from cdam_core.models import ArxModel, save_model
-    from cdam_core.record.realdata.emps import emps_path, load_emps
+    from cdam_core.record.realdata.emps import EMPS_UNITS, emps_path, load_emps
     from cdam_core.residual.analyse import analyse
     from cdam_core.residual.benchmark import greybox_of
     if not emps_path("DATA_EMPS").is_file():
@@ -44,7 +44,8 @@ def _emps_models(tmp: Path) -> dict:
     U, Y = d["force"][:, None], d["qm"][:, None]
     save_model(tmp / "emps_arx.json", ArxModel((2, 2, 1)).fit(U, Y), inputs=["force"],
                outputs=["qm"])
-    sel = analyse("rigid_axis", d["t"], {"tau": d["force"], "q": d["qm"]}, free_run=False)
+    sel = analyse("rigid_axis", d["t"], {"tau": d["force"], "q": d["qm"]}, free_run=False,
+                  units=EMPS_UNITS)
     save_model(tmp / "emps_gb.json", greybox_of(sel.final, float(np.mean(np.diff(d["t"])))),
                inputs=["force"], outputs=["qm"])
     return {"arx_emps": tmp / "emps_arx.json", "greybox_emps": tmp / "emps_gb.json"}

@@ -29,7 +29,8 @@ def _emps_model():
     d = load_emps("DATA_EMPS")
     U, Y = d["force"][:, None], d["qm"][:, None]
     g = GreyBox("rigid_axis", float(np.mean(np.diff(d["t"]))),
-                [CoulombFriction("tau"), AsymmetricFriction("tau")], cutoff_hz=400.0)
+                [CoulombFriction("tau"), AsymmetricFriction("tau")], cutoff_hz=400.0,
+                fixed={"G": 0.0, "Gc": 0.0})   # EMPS is a linear axis
     g.fit(U, Y)
     return g, U, Y
 

@@ -10,16 +10,17 @@ force is inside the Coulomb level).
 Run: python benchmarks/emps_effects.py (about ten minutes of CPU: a numpy loop per run)."""
 import numpy as np
 from cdam_core.residual.analyse import analyse
-from cdam_core.record.realdata.emps import load_emps
+from cdam_core.record.realdata.emps import EMPS_UNITS, load_emps
 from cdam_core.models.greybox.estimation import design
 from cdam_core.models.greybox.registry import get_model
 from cdam_core.models.greybox.effects import CoulombFriction
 d0 = load_emps("DATA_EMPS")
-sel = analyse("rigid_axis", d0["t"], {"tau": d0["force"], "q": d0["qm"]}, free_run=False)
+sel = analyse("rigid_axis", d0["t"], {"tau": d0["force"], "q": d0["qm"]}, free_run=False,
+              units=EMPS_UNITS)
 sig = sel.declared.signals; trim = sel.settings["trim"]; dt = float(sig["dt"])
 d, p = load_emps("DATA_EMPS"), load_emps("DATA_EMPS_PULSES")
 N = len(d["qm"])
-m0 = get_model("rigid_axis")
+m0 = get_model("rigid_axis", {"G": 0.0, "Gc": 0.0})
 s, eqs = design(m0, sig, (CoulombFriction("tau"),))
 y, cols = eqs["tau"]
 filt = m0.equation_filter("tau", s)

@@ -94,6 +94,25 @@ def greybox_file(path, effects=("coulomb", "asymmetric", "external", "delay"), m
     return path
 
 
+PENDULUM = {"M": 0.5, "Fv": 2.0, "offset": 0.05, "G": 1.5, "Gc": 0.44, "Fc": 1.0, "dt": 0.001}
+
+
+def pendulum_file(path):
+    """A rotary rigid_axis in a vertical plane: gravity G sin q + Gc cos q (an encoder whose
+    zero is 0.29 rad off the hanging position), a torque offset and smoothed dry friction."""
+    p = PENDULUM
+    names = ["M", "Fv", "offset", "G", "Gc", "coulomb_friction@tau.Fc"]
+    d = {"declared": "rigid_axis", "dt": p["dt"], "n_inputs": 1, "n_outputs": 1, "fixed": {},
+         "extra_columns": [], "filter": {"cutoff_hz": 50.0, "order": 4},
+         "effects": [{"name": "coulomb_friction", "channel": "tau", "eps": 0.01,
+                      "smooth": True}],
+         "parameters": {"names": names, "values": [p[k.split(".")[-1]] for k in names],
+                        "std": [None] * len(names), "estimated": names},
+         "substeps": 2}
+    save_model(path, GreyBox.from_dict(d), inputs=["tau"], outputs=["q"])
+    return path
+
+
 def rigid_record(n=600, seed=2, extra=True):
     """Force (and load) held random levels beyond the friction; positions from the model."""
     rng = np.random.default_rng(seed)

@@ -14,9 +14,9 @@ from cdam_core import firmware as fw
 from cdam_core.cli.main import main
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _kinds import (AERIAL, QUAD, RIGID, aerial_file, arx_file, arx_twin32,  # noqa: E402
+from _kinds import (AERIAL, PENDULUM, QUAD, RIGID, aerial_file, arx_file, arx_twin32,  # noqa: E402
                     flexible_file, greybox_file, hybrid_file, quadrotor_file, rigid_record,
-                    rigid_twin32)
+                    rigid_twin32, pendulum_file)
 
 HOSTILE = '"); system("rm -rf /'
 
@@ -82,7 +82,9 @@ def test_greybox_header_numbers_and_codes(tmp_path):
     path = greybox_file(tmp_path / "gb.json")
     text = fw.export_header(path, tmp_path / "model.hpp").read_text()
     p = RIGID
-    np.testing.assert_array_equal(_array(text, "kBase"), np.float32([p["M"], p["Fv"], p["offset"]]))
+    # a file written before the gravity terms existed: G and Gc at 0
+    np.testing.assert_array_equal(_array(text, "kBase"),
+                                  np.float32([p["M"], p["Fv"], p["offset"], 0.0, 0.0]))
     # rigid axis: the accelerations enter as M q'', so the inverse inertia is 1 / M
     assert _array(text, "kInertia")[0] == pytest.approx(1 / p["M"], rel=1e-7)
     assert re.search(r"kEffectCode\[4\] = \{1, 2, 3, 4\}", text)
@@ -93,6 +95,14 @@ def test_greybox_header_numbers_and_codes(tmp_path):
     assert re.search(rf"kEffectLag\[4\] = \{{0, 0, 0, {L}\}}", text)
     assert par[3, 0] == pytest.approx(L * p["dt"] - p["delay"], rel=1e-6)
     assert _int(text, "kSubsteps") == p["substeps"] and _int(text, "kDelayLag") == L
+
+
+def test_rotary_axis_header_holds_its_gravity(tmp_path):
+    text = fw.export_header(pendulum_file(tmp_path / "p.json"), tmp_path / "model.hpp").read_text()
+    p = PENDULUM
+    np.testing.assert_array_equal(np.float32(_array(text, "kBase")),
+                                  np.float32([p[k] for k in ("M", "Fv", "offset", "G", "Gc")]))
+    assert re.search(r"CDAM_MODEL_DECLARED 0\b", text)
 
 
 def test_no_text_from_the_file_reaches_the_header(tmp_path):

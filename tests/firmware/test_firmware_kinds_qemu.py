@@ -21,7 +21,8 @@ from cdam_core.models.file import load_model
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _kinds import (RIGID, aerial_file, arx_file, arx_twin32, flexible_file,  # noqa: E402
-                    greybox_file, hybrid_file, quadrotor_file, rigid_record, rigid_twin32)
+                    greybox_file, hybrid_file, pendulum_file, quadrotor_file, rigid_record,
+                    rigid_twin32)
 
 pytestmark = [pytest.mark.slow,
               pytest.mark.skipif(fw.toolchain_available() is not None,
@@ -136,6 +137,20 @@ def test_flexible_joint_with_every_effect_matches_python(tmp_path):
     assert res["heap_free"] and res["instructions_per_step"] <= STEP_BUDGET
 
 
+def test_rotary_axis_with_gravity_matches_python(tmp_path):
+    """A pendulum (rigid_axis with G sin q + Gc cos q): the firmware's step evaluates the
+    gravity columns (before they existed it read the file's first three numbers only)."""
+    path = pendulum_file(tmp_path / "p.json")
+    g = load_model(path)
+    U = 4.0 * np.sin(2 * np.pi * 0.5 * np.arange(2000) * 1e-3)[:, None]   # N m, 2 s
+    Y = _record(g, U)
+    assert np.ptp(Y) > 0.5          # a swing over which sin and cos are far from linear
+    res = fw.check(path, build_dir=tmp_path / "b", record=(U, Y))
+    print("pendulum", res)
+    assert res["max_rel_error"] <= 1e-5 and res["max_rel_error_free_run"] <= 1e-4
+    assert res["heap_free"] and res["instructions_per_step"] <= STEP_BUDGET
+
+
 def test_quadrotor_with_flight_effects_matches_python(tmp_path):
     path = quadrotor_file(tmp_path / "q.json")
     res = fw.check(path, build_dir=tmp_path / "b")      # the default synthetic record
@@ -213,13 +228,14 @@ def test_emps_axis_found_by_the_residual_loop(tmp_path, bundled_record):
     """The model `cdam residual --save` writes for DATA_EMPS, checked on DATA_EMPS_PULSES
     (both ship in data/: missing is a failure)."""
     from cdam_core.models.file import save_model
-    from cdam_core.record.realdata.emps import load_emps
+    from cdam_core.record.realdata.emps import EMPS_UNITS, load_emps
     from cdam_core.residual.analyse import analyse
     from cdam_core.residual.benchmark import greybox_of
     bundled_record("emps/DATA_EMPS.mat")
     bundled_record("emps/DATA_EMPS_PULSES.mat")
     d = load_emps("DATA_EMPS")
-    sel = analyse("rigid_axis", d["t"], {"tau": d["force"], "q": d["qm"]}, free_run=False)
+    sel = analyse("rigid_axis", d["t"], {"tau": d["force"], "q": d["qm"]}, free_run=False,
+                  units=EMPS_UNITS)
     g = greybox_of(sel.final, float(np.mean(np.diff(d["t"]))))
     path = tmp_path / "emps.json"
     save_model(path, g, inputs=["force"], outputs=["qm"])

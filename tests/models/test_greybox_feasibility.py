@@ -25,7 +25,7 @@ def _record(fv, fc=0.0, n=4000, seed=0):
 
 def test_negative_damping_is_refitted_with_bounds():
     t, q, tau = _record(fv=-0.5)                 # an "active" axis: no passive model fits it
-    m = get_model("rigid_axis")
+    m = get_model("rigid_axis", {"G": 0.0, "Gc": 0.0})   # a linear axis
     sig = m.prepare(t, {"tau": tau, "q": q})
     free = fit(m, sig)                           # structure searches: unconstrained, flagged
     assert free.violations == ["Fv"] and free.theta["Fv"] == free.unconstrained["Fv"]

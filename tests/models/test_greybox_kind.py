@@ -73,7 +73,8 @@ def test_free_run_equals_a_numpy_integrator():
     ref = q.copy()
     for k in range(1, len(q) - 1):
         for _ in range(g.substeps_):
-            a = (u[k] - th["Fv"] * v - th["offset"] - th["coulomb_friction@tau.Fc"] * np.sign(v)) / th["M"]
+            a = (u[k] - th["Fv"] * v - th["offset"] - th["G"] * np.sin(x) - th["Gc"] * np.cos(x)
+                 - th["coulomb_friction@tau.Fc"] * np.sign(v)) / th["M"]
             v += h * a
             x += h * v
         ref[k + 1] = x

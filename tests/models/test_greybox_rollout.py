@@ -19,6 +19,9 @@ from cdam_core.models.greybox.effects import (ActuatorDelay, AsymmetricFriction,
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "residual"))
 from joint_generator import Joint, rigid_axis  # noqa: E402
 
+# the closed forms here are of a linear axis: no gravity terms
+LINEAR = {"G": 0.0, "Gc": 0.0}
+
 
 SWITCHING_OPS = ("sign", "gt", "lt", "ge", "le")
 
@@ -159,8 +162,8 @@ def test_rk4_windows_against_the_closed_form():
         vinf = u[k] / Fv
         x[k + 1] = x[k] + vinf * dt + (v[k] - vinf) * (1 - np.exp(-a * dt)) / a
         v[k + 1] = vinf + (v[k] - vinf) * np.exp(-a * dt)
-    g = GreyBox("rigid_axis", dt, fixed={"offset": 0.0})
-    g._set(g._structure(), {"M": M, "Fv": Fv, "offset": 0.0}, {}, ["M", "Fv"], 1, 1)
+    g = GreyBox("rigid_axis", dt, fixed={"offset": 0.0, **LINEAR})
+    g._set(g._structure(), {"M": M, "Fv": Fv, "offset": 0.0, **LINEAR}, {}, ["M", "Fv"], 1, 1)
     starts = np.arange(5, n - 120, 50)
     x0, v0 = x[starts][:, None], v[starts][:, None]
     Y = x[:, None]
@@ -482,8 +485,8 @@ def test_rk4_stick_slip_against_the_exact_solution(force):
     span = np.ptp(x)
     assert np.max(np.abs(xs[rows] - x[rows])) > off * span
     for substeps, tl in zip((1, 4), tol):
-        g = GreyBox("rigid_axis", dt, [CoulombFriction("tau")], fixed={"offset": 0.0})
-        g._set(g._structure(), {"M": M, "Fv": Fv, "offset": 0.0,
+        g = GreyBox("rigid_axis", dt, [CoulombFriction("tau")], fixed={"offset": 0.0, **LINEAR})
+        g._set(g._structure(), {"M": M, "Fv": Fv, "offset": 0.0, **LINEAR,
                                 "coulomb_friction@tau.Fc": Fc},
                {}, ["M", "Fv", "coulomb_friction@tau.Fc"], 1, 1, substeps=substeps)
         for h in (g, _numpy_only(g)):

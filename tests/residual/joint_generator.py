@@ -137,9 +137,11 @@ class Joint:
 
 
 def rigid_axis(fs=1000.0, duration=20.0, M=0.5, Fv=2.0, Fc=1.0, offset=0.0, counts=0,
-               noise=0.0, seed=0, bias=0.0) -> dict:
-    """A rigid axis M q'' + Fv q' + Fc tanh(q' / 1 mrad/s) + offset = tau, open-loop multisine
-    torque (plus a constant ``bias``) held over each sample, RK4 on a fine grid."""
+               noise=0.0, seed=0, bias=0.0, G=0.0, zero=0.0) -> dict:
+    """A rigid axis M q'' + Fv q' + Fc tanh(q' / 1 mrad/s) + offset + G sin(q + zero) = tau,
+    open-loop multisine torque (plus a constant ``bias``) held over each sample, RK4 on a fine
+    grid. ``G``: a rotary axis in a vertical plane (a pendulum), its encoder's zero ``zero``
+    rad from the hanging position (it starts hanging, at q = -zero)."""
     rng = np.random.default_rng(seed)
     dt = 1.0 / fs
     n = int(round(duration * fs))
@@ -150,8 +152,9 @@ def rigid_axis(fs=1000.0, duration=20.0, M=0.5, Fv=2.0, Fc=1.0, offset=0.0, coun
     u = u + bias
 
     def f(x, uk):
-        return np.array([x[1], (uk - offset - Fv * x[1] - Fc * np.tanh(x[1] / 1e-3)) / M])
-    x = np.zeros(2)
+        return np.array([x[1], (uk - offset - G * np.sin(x[0] + zero) - Fv * x[1]
+                                - Fc * np.tanh(x[1] / 1e-3)) / M])
+    x = np.array([-zero, 0.0])
     q = np.zeros(n)
     sub = 8
     h = dt / sub
@@ -169,7 +172,7 @@ def rigid_axis(fs=1000.0, duration=20.0, M=0.5, Fv=2.0, Fc=1.0, offset=0.0, coun
     if noise:
         q = q + rng.normal(0.0, noise, n)
     return {"t": t, "tau": u, "q": q,
-            "truth": {"M": M, "Fv": Fv, "Fc": Fc, "offset": offset}}
+            "truth": {"M": M, "Fv": Fv, "Fc": Fc, "offset": offset, "G": G, "zero": zero}}
 
 
 def _main(argv=None) -> int:

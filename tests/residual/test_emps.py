@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from cdam_core.record.realdata.emps import load_emps
+from cdam_core.record.realdata.emps import EMPS_UNITS, load_emps
 
 
 @pytest.fixture(autouse=True, scope="module")
@@ -38,7 +38,7 @@ def emps_selection():
     from cdam_core.residual import analyse
     d, p = load_emps("DATA_EMPS"), load_emps("DATA_EMPS_PULSES")
     return analyse("rigid_axis", d["t"], {"tau": d["force"], "q": d["qm"]},
-                   validation=(p["t"], {"tau": p["force"], "q": p["qm"]}))
+                   validation=(p["t"], {"tau": p["force"], "q": p["qm"]}), units=EMPS_UNITS)
 
 
 def test_emps_published_values_under_their_timing():
@@ -47,7 +47,8 @@ def test_emps_published_values_under_their_timing():
     from cdam_core.residual import analyse
     d = load_emps("DATA_EMPS")
     sel = analyse("rigid_axis", d["t"], {"tau": d["force"], "q": d["qm"]}, free_run=False,
-                  timing="sampled", max_steps=1, estimator="idim-ls")
+                  timing="sampled", max_steps=1, estimator="idim-ls",
+                  units=EMPS_UNITS)
     th = sel.steps[0].candidate.fit.theta
     est = {"M": th["M"], "Fv": th["Fv"], "Fc": th["coulomb_friction@tau.Fc"],
            "offset": th["offset"]}
@@ -112,13 +113,14 @@ def test_emps_pulses_resonance_is_unexplained(emps_selection):
     # the two timings compared under one estimator, IDIM-LS (on PULSES output error is chosen
     # under the hold: p 0.001 at level 0.005 on RK4 windows, the sign held over each step)
     sampled = analyse("rigid_axis", p["t"], sig, free_run=False, timing="sampled",
-                      estimator="idim-ls")
+                      estimator="idim-ls", units=EMPS_UNITS)
     names = [s.candidate.effect.name for s in sampled.steps]
     assert names[0] == "coulomb_friction"
     assert set(names) <= {"coulomb_friction", "asymmetric_friction"}
     peaks = [u["frequency_hz"] for u in sampled.unexplained if u["kind"] == "spectral_peak"]
     assert any(15.0 <= f <= 27.0 for f in peaks), sampled.unexplained
-    held = analyse("rigid_axis", p["t"], sig, free_run=False, estimator="idim-ls")
+    held = analyse("rigid_axis", p["t"], sig, free_run=False, estimator="idim-ls",
+                   units=EMPS_UNITS)
     assert held.settings["timing"]["chosen"] == "held"
     lines = [u["frequency_hz"] for u in held.unexplained if u["kind"] == "periodic_line"]
     assert any(abs(f - 100.0) < 0.5 for f in lines), held.unexplained
@@ -143,8 +145,8 @@ def test_benchmark_protocol_reproduces_the_published_model():
     from cdam_core.models.greybox.augmented import GreyBox
     from cdam_core.models.greybox.effects import CoulombFriction
     p = load_emps("DATA_EMPS_PULSES")
-    g = GreyBox("rigid_axis", 0.001, [CoulombFriction("tau")])
-    g._set(g._structure(), {"M": PUBLISHED["M"], "Fv": PUBLISHED["Fv"],
+    g = GreyBox("rigid_axis", 0.001, [CoulombFriction("tau")], fixed={"G": 0.0, "Gc": 0.0})
+    g._set(g._structure(), {"M": PUBLISHED["M"], "Fv": PUBLISHED["Fv"], "G": 0.0, "Gc": 0.0,
                             "offset": PUBLISHED["offset"],
                             "coulomb_friction@tau.Fc": PUBLISHED["Fc"]}, {}, [], 1, 1)
     sc = simulation_score(g, p["force"], p["qm"], EMPS_PROTOCOL["n_init"], EMPS_PROTOCOL["scale"])

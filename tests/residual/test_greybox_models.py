@@ -31,7 +31,7 @@ def test_flexible_joint_recovers_parameters():
 
 def test_free_run_reproduces_the_record():
     rec = rigid_axis_record(seed=1, duration=4.0, Fc=1.5, noise=0.0)
-    m = get_model("rigid_axis")
+    m = get_model("rigid_axis", {"G": 0.0, "Gc": 0.0})   # the generator's linear axis
     sig = m.prepare(rec["t"], {"tau": rec["tau"], "q": rec["q"]})
     f = fit(m, sig, (CoulombFriction("tau"),))
     # with the true parameters, semi-implicit Euler must reproduce the RK4 record

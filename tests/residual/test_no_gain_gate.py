@@ -52,8 +52,8 @@ def _prepared(t, u, q, extra, fc, timing="held"):
     """The records here hold the torque over each sample (a zero-order hold): the "held"
     timing. Prepared as "sampled" (the state at the sample instant), the half-sample timing
     error is left in the equations and the windows, and on the frictionless axis a Coulomb
-    friction absorbs part of it (test_zoh_timing.py)."""
-    m = get_model("rigid_axis")
+    friction absorbs part of it (test_zoh_timing.py). A linear axis: no gravity terms."""
+    m = get_model("rigid_axis", {"G": 0.0, "Gc": 0.0})
     return m, m.prepare(t, {"tau": u, "q": q}, DerivativeFilter(fc), extra, timing)
 
 

@@ -45,8 +45,12 @@ def test_cli_stdout_is_a_summary_of_the_json(tmp_path, capsys):
     js = json.loads((tmp_path / "o.json").read_text())
     assert not out.lstrip().startswith("{")
     rows = dict(re.findall(r"^  (\S+) \S+ \((\S+) %\)$", out, flags=re.M))
-    assert set(rows) == set(js["final_parameters"])
+    dropped = set(re.findall(r"^  (\S+) 0 \(dropped: no held-out gain\)$", out, flags=re.M))
+    assert dropped == {d["term"] for d in js["settings"]["declared_terms_dropped"]}
+    assert set(rows) | dropped == set(js["final_parameters"]) and not set(rows) & dropped
     for k, v in js["final_parameters"].items():
+        if k in dropped:
+            continue
         rel = 100 * abs(js["final_std"][k] / v)
         assert float(rows[k]) == pytest.approx(rel, rel=0.05), k
     assert f"found coulomb_friction on {js['findings'][0]['channel']}" in out

@@ -44,7 +44,7 @@ def _axis(fs=1000.0, duration=12.0, noise=1e-5, seed=0):
 
 def _prepared():
     t, u, q = _axis()
-    m = get_model("rigid_axis")
+    m = get_model("rigid_axis", {"G": 0.0, "Gc": 0.0})   # a linear axis: no gravity terms
     sig = m.prepare(t, {"tau": u, "q": q}, DerivativeFilter(100.0), timing="held")
     return m, sig
 

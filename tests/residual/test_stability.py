@@ -45,7 +45,7 @@ def test_rigid_axis_is_an_integrator_and_a_decay():
     q = 0.2 * np.sin(2 * np.pi * 0.7 * t)
     tau = 0.5 * np.gradient(np.gradient(q, 1e-3), 1e-3) + 2.0 * np.gradient(q, 1e-3)
     g = GreyBox("rigid_axis", dt=1e-3, cutoff_hz=50.0).fit(tau[:, None], q[:, None])
-    g.set_parameters({"M": 0.5, "Fv": 2.0, "offset": 0.0})
+    g.set_parameters({"M": 0.5, "Fv": 2.0, "offset": 0.0, "G": 0.0, "Gc": 0.0})
     lam = np.sort(g.linearised_eigenvalues().real)
     np.testing.assert_allclose(lam, [-4.0, 0.0], atol=1e-5)
     assert g.stability()["stable"]

@@ -287,10 +287,12 @@ class StepModel {
   void errors(const float* u, float* e) const {
     const float* th = cdam_model::kBase;   // the declared model's parameter_names, in order
 #if CDAM_MODEL_DECLARED == 0
-    // rigid_axis: tau = M q'' + Fv q' + offset
+    // rigid_axis [M, Fv, offset, G, Gc]: tau = M q'' + Fv q' + offset + G sin q + Gc cos q
     e[0] = u[0];
     e[0] = e[0] - th[1] * v_[0];
     e[0] = e[0] - th[2] * 1.0f;
+    e[0] = e[0] - th[3] * std::sin(x_[0]);
+    e[0] = e[0] - th[4] * std::cos(x_[0]);
 #elif CDAM_MODEL_DECLARED == 1
     // flexible_joint [Im, Dm, Ks, Kd, I, Dl, G, Gc, offset_m, offset_l], positions
     // (theta_m, q), cable deflection d = theta_m - q (through a backlash dead band if the

@@ -16,27 +16,25 @@ from contextlib import nullcontext
 from pathlib import Path
 
 
-EMPS_UNITS = {"tau": "N", "q": "m"}     # the EMPS axis: force gtau * vir in N, position in m
-
-
 def emps_report(out_dir, ticker=None) -> Path:
     """Write the EMPS example report into ``out_dir``; returns the path of index.md.
     ``ticker(what)``: a context manager shown while a long step runs (none by default)."""
-    from cdam_core.record.realdata.emps import load_emps
+    from cdam_core.record.realdata.emps import EMPS_UNITS, load_emps
     from cdam_core.report.residual import write_report
     from cdam_core.residual.analyse import analyse
     ticker = ticker or (lambda what: nullcontext())
     d, p = load_emps("DATA_EMPS"), load_emps("DATA_EMPS_PULSES")
     with ticker("the residual loop on DATA_EMPS (structure, estimator, free runs)"):
         sel = analyse("rigid_axis", d["t"], {"tau": d["force"], "q": d["qm"]},
-                      validation=(p["t"], {"tau": p["force"], "q": p["qm"]}))
+                      validation=(p["t"], {"tau": p["force"], "q": p["qm"]}), units=EMPS_UNITS)
     out = write_report(sel, out_dir, title="EMPS (DATA_EMPS, free run on DATA_EMPS_PULSES)",
                        source="EMPS benchmark (Janot, Gautier, Brunot 2019): force = gtau * vir, "
                               "output qm; free-run errors on DATA_EMPS_PULSES",
                        units=EMPS_UNITS)
     _emps_benchmark(sel, p, Path(out_dir), ticker)
     with ticker("the residual loop on DATA_EMPS_PULSES"):
-        selp = analyse("rigid_axis", p["t"], {"tau": p["force"], "q": p["qm"]}, free_run=False)
+        selp = analyse("rigid_axis", p["t"], {"tau": p["force"], "q": p["qm"]}, free_run=False,
+                       units=EMPS_UNITS)
     write_report(selp, Path(out_dir) / "pulses", title="EMPS DATA_EMPS_PULSES",
                  source="EMPS benchmark, DATA_EMPS_PULSES (pulses inside vir)", units=EMPS_UNITS)
     return out

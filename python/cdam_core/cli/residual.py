@@ -83,6 +83,7 @@ def run(args) -> int:
     model.check_units({name: (col, units.get(col)) for name, col in mapping.items()},
                       str(args.data))
     signals = {name: ds.column(col) for name, col in mapping.items()}
+    signal_units = {name: u for name, col in mapping.items() if (u := units.get(col))}
     used = set(mapping.values())
     extra = {c: ds.column(c) for c in inputs if c not in used}
     fixed = parse_fixed(args.fixed)
@@ -105,7 +106,7 @@ def run(args) -> int:
                       alpha=args.alpha, free_run=not args.no_free_run, fixed=fixed or None,
                       declared=declared, keep_terms=terms, estimator=_estimator(args),
                       stick_slip=args.stick_slip,
-                      timing=args.timing)
+                      timing=args.timing, units=signal_units)
     js = to_json(sel)
     js["source"] = str(args.data)
     js["declared_effects"] = declared
@@ -253,9 +254,13 @@ def _summary(js: dict) -> list[str]:
     std = js.get("final_std") or {}
     out.append("final parameters (value, relative sigma):")
     dropped = {d.get("term") for d in st.get("declared_terms_dropped") or ()}
+    ruled = {d.get("term") for d in st.get("declared_terms_ruled_out") or ()}
     for k, v in (js.get("final_parameters") or {}).items():
         if k in dropped:
             out.append(f"  {k} 0 (dropped: no held-out gain)")
+            continue
+        if k in ruled:
+            out.append(f"  {k} 0 (ruled out by the units)")
             continue
         s = std.get(k)
         rel = (f"{100 * abs(s / v):.2g} %" if s is not None and v not in (0, None) and

@@ -46,8 +46,8 @@ def _input_range(fm: StepFirmwareModel):
         par = np.asarray(a["kEffectParam"], np.float64).reshape(-1, 4)
         code = np.asarray(fm.int_arrays["kEffectCode"])[:len(par)]
         b = np.asarray(a["kBase"], np.float64)
-        # rigid_axis: its offset; flexible_joint: gravity (G, Gc) and the constants
-        static = abs(b[2]) if fm.macros["CDAM_MODEL_DECLARED"] == 0 else \
+        # rigid_axis: its offset and gravity (G, Gc); flexible_joint: gravity and the constants
+        static = float(np.sum(np.abs(b[2:5]))) if fm.macros["CDAM_MODEL_DECLARED"] == 0 else \
             float(np.sum(np.abs(b[6:10])))
         static += np.sum(np.abs(par[code == 1, 0])) + np.sum(np.abs(par[code == 7, 0] *
                                                                     par[code == 7, 1]))

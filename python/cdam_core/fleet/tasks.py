@@ -292,7 +292,8 @@ def _residual(task: Task):
                   alpha=o["alpha"], free_run=o["free_run"], fixed=o["fixed"] or None,
                   declared=declared, keep_terms=list(model_meta.get("terms") or []),
                   estimator=o.get("estimator", "auto"),
-                  stick_slip=o.get("stick_slip", "auto"))
+                  stick_slip=o.get("stick_slip", "auto"),
+                  units={name: u for name, col in mapping.items() if (u := ds.units.get(col))})
     js = to_json(sel)
     metrics = {"effects_found": len(js["findings"]),
                "effects": ",".join(f"{f['effect']}@{f['channel']}" for f in js["findings"]),

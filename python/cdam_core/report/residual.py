@@ -257,6 +257,10 @@ def write_report(sel: Selection, out_dir, title: str | None = None, source: str 
     if dropped:
         lines += ["", "Declared terms the held-out data do not support (fixed at 0): "
                   + ", ".join(f"{d['term']} (p {d['p_value']:.2g})" for d in dropped) + "."]
+    ruled = sel.settings.get("declared_terms_ruled_out") or []
+    if ruled:
+        lines += ["", "Declared terms the units rule out (fixed at 0): "
+                  + ", ".join(d["term"] for d in ruled) + f" ({ruled[0]['reason']})."]
     derived = js.get("derived_parameters") or {}
     if derived:
         lines += ["", "Derived from the final parameters (the model's `derived`): " + ", ".join(

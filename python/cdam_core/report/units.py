@@ -14,7 +14,7 @@ _SIMPLER = {"N s²/m": "kg", "N m s²/rad": "kg m²"}
 
 # model parameter -> unit template in F (force/torque) and X (coordinate)
 _DECLARED = {
-    "rigid_axis": {"M": "F s²/X", "Fv": "F s/X", "offset": "F"},
+    "rigid_axis": {"M": "F s²/X", "Fv": "F s/X", "offset": "F", "G": "F", "Gc": "F"},
     "flexible_joint": {"Im": "F s²/X", "Dm": "F s/X", "Ks": "F/X", "Kd": "F s/X",
                        "I": "F s²/X", "Dl": "F s/X", "G": "F", "Gc": "F", "offset_m": "F",
                        "offset_l": "F"},
@@ -31,7 +31,8 @@ _EFFECT = {"Fc": "F", "dFc": "F", "dFv": "F s/X", "Fc_pos": "F", "Fc_neg": "F",
            "Fv_pos": "F s/X", "Fv_neg": "F s/X", "width": "X", "K3": "F/X³", "delay": "s",
            "mass": "kg", "m": "kg"}
 # derived quantity (the declared model's ``derived``) -> template, on the model's first channel
-_DERIVED = {"flexible_joint": {"gravity_amplitude": "F", "gravity_zero_rad": "X",
+_DERIVED = {"rigid_axis": {"gravity_amplitude": "F", "gravity_zero_rad": "X"},
+            "flexible_joint": {"gravity_amplitude": "F", "gravity_zero_rad": "X",
                                "encoder_zero_offset_rad": "X", "torque_offset": "F"}}
 # the (force, coordinate) signal pair of each equation channel
 _PAIRS = {"rigid_axis": {"tau": ("tau", "q")},

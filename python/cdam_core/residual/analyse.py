@@ -18,7 +18,7 @@ def analyse(model: str, t, signals: dict, extra: dict | None = None, fixed: dict
             validation: tuple | None = None, options: dict | None = None,
             max_steps: int | None = None, declared=(), keep_terms=(),
             estimator: str = "auto", timing: str = "auto",
-            stick_slip: str = "auto") -> Selection:
+            stick_slip: str = "auto", units: dict | None = None) -> Selection:
     """Fit ``model`` to the signals, select missing effects, return the :class:`Selection`.
 
     ``signals`` maps the model's signal names (``tau``, ``q`` / ``tau_m``, ``theta_m``, ``q`` /
@@ -40,6 +40,10 @@ def analyse(model: str, t, signals: dict, extra: dict | None = None, fixed: dict
     documented bands), "sampled" or "held" (see ``GreyBoxModel.prepare``); the choice and its
     evidence are in ``settings["timing"]`` (a given "sampled" is checked against the record:
     ``record`` and, when the record prefers the hold, ``warning``);
+    ``units``: the declared units of the signals (``{"tau": "N", "q": "m"}``, the known
+    ones): declared terms they rule out are fixed at 0 (a linear axis has no gravity terms,
+    ``GreyBoxModel.ruled_out``; listed in ``settings["declared_terms_ruled_out"]``), unless
+    ``fixed`` gives them;
     ``cutoff_hz``: derivative filter cutoff (default: chosen from the record by held-out
     simulation, :func:`cdam_core.residual.cutoff.choose_cutoff`; the choice and the candidates'
     scores are in ``settings["filter_choice"]``).
@@ -52,11 +56,22 @@ def analyse(model: str, t, signals: dict, extra: dict | None = None, fixed: dict
     if stick_slip not in STICK_SLIP_CHOICES:
         raise ValueError(f"stick_slip: expected one of {', '.join(STICK_SLIP_CHOICES)}, "
                          f"got {stick_slip!r}")
+    if units is not None and not (isinstance(units, dict) and all(
+            isinstance(k, str) and isinstance(v, str) for k, v in units.items())):
+        raise ValueError("units: expected a dict {signal: unit text}")
+    ruled = get_model(model).ruled_out(dict(units or {}))
+    ruled = {p: why for p, why in ruled.items() if p not in (fixed or {})}
+    if ruled:
+        fixed = {**(fixed or {}), **{p: 0.0 for p in ruled}}
     m = get_model(model, fixed)
     keep_terms = [keep_terms] if isinstance(keep_terms, str) else list(keep_terms)
     unknown = [p for p in keep_terms if p not in m.parameter_names]
     if unknown:
         raise ValueError(f"keep_terms: {', '.join(map(str, unknown))} not parameters of {m.name}")
+    clash = [p for p in keep_terms if p in ruled]
+    if clash:
+        raise ValueError(f"keep_terms: {', '.join(clash)} declared, but the units rule "
+                         f"{'them' if len(clash) > 1 else 'it'} out ({ruled[clash[0]]})")
     if isinstance(declared, str):
         declared = [declared]
     for name in declared:
@@ -111,9 +126,10 @@ def analyse(model: str, t, signals: dict, extra: dict | None = None, fixed: dict
         if not check["identifiable"] and len(m.positions) == 2 and "theta_m" in signals:
             # not a cable's deflection: the motor side alone, a rigid axis with its friction
             motor = {"tau": signals[m.inputs[0]], "q": signals["theta_m"]}
+            mu = {k: (units or {}).get(s) for k, s in (("tau", m.inputs[0]), ("q", "theta_m"))}
             sel = analyse("rigid_axis", t, motor, extra, None, None, alpha, free_run,
                           None, options, max_steps, declared, estimator=estimator,
-                          stick_slip=stick_slip,
+                          stick_slip=stick_slip, units={k: u for k, u in mu.items() if u},
                           timing=timing_info["chosen"] if timing_info["rule"] == "given"
                           else "auto")
             sel.settings["identifiability"] = {
@@ -128,6 +144,9 @@ def analyse(model: str, t, signals: dict, extra: dict | None = None, fixed: dict
                  estimator=estimator, stick_slip=stick_slip)
     sel.settings["filter_choice"] = choice
     sel.settings["timing"] = timing_info
+    if ruled:
+        sel.settings["declared_terms_ruled_out"] = [{"term": p, "reason": why}
+                                                    for p, why in ruled.items()]
     if check is not None:
         sel.settings["identifiability"] = check
     return sel

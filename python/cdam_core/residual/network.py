@@ -167,7 +167,9 @@ def network_residual(model, sig: dict, equation: str, hidden: int = 6, epochs: i
     keep[trim:n - trim] = True
     declared_effects = tuple(declared_effects)
     y, cols = _columns(model, sig, declared_effects, equation)
-    names = [p for p in cols if np.ptp(cols[p][keep]) > 0]
+    # the network sees the model's columns, not those of terms fixed at 0 (absent from the
+    # model: a linear axis's gravity); a term fixed at a value (a weighed mass) stays
+    names = [p for p in cols if model.fixed.get(p, None) != 0.0 and np.ptp(cols[p][keep]) > 0]
     X0 = np.column_stack([cols[p] for p in names])
     r0 = y[keep] - _train(X0[keep], y[keep], hidden, epochs, seed).predict(X0[keep])[:, 0]
     if candidates is None:

@@ -215,6 +215,11 @@ class GreyBoxModel:
         """Physical quantities that follow from the estimated parameters (none by default)."""
         return {}
 
+    def ruled_out(self, units: dict) -> dict:
+        """``{term: reason}``: the declared terms the signals' declared units (``{signal:
+        unit}``, the known ones) exclude; they are fixed at 0 (none by default)."""
+        return {}
+
     def equation_filter(self, eq: str, s: dict) -> DerivativeFilter:
         """The parallel filter of equation ``eq``: the lowest of the positions' derivative
         cut-offs (every equation of a joint holds both encoders' signals), same order."""
@@ -308,10 +313,27 @@ class GreyBoxModel:
         return eq in self.equation_names
 
 
-class RigidAxis(GreyBoxModel):
-    """One rigid axis (the EMPS kind): ``tau = M q'' + Fv q' + offset``.
+def gravity_derived(theta: dict) -> dict:
+    """``G sin q + Gc cos q = amplitude sin(q + zero)``: the gravity's amplitude and the angle
+    of the encoder's zero from the hanging position (where ``Gc`` is in the model)."""
+    g, gc = float(theta.get("G", 0.0)), float(theta.get("Gc", 0.0))
+    if not gc:
+        return {}
+    return {"gravity_amplitude": float(np.hypot(g, gc)),
+            "gravity_zero_rad": float(np.arctan2(gc, g))}
 
-    Signals: ``tau`` (force or torque, input) and ``q`` (position, output).
+
+class RigidAxis(GreyBoxModel):
+    """One rigid axis: ``tau = M q'' + Fv q' + offset + G sin q + Gc cos q``.
+
+    Signals: ``tau`` (force or torque, input) and ``q`` (position, output). A linear axis (the
+    EMPS kind: force in N, position in m) carries its weight in the constant ``offset``; a
+    rotary axis in a vertical plane (a robot's joint, a pendulum) carries it as gravity,
+    ``G sin q`` with ``Gc cos q`` for an encoder whose zero is not the hanging position. The
+    three are declared terms tested on held-out data (``optional_terms``); where the units
+    say the axis is linear (:meth:`ruled_out`) the gravity terms are fixed at 0. Measured
+    without them (a plain-numpy pendulum M 0.5, Fv 2, Fc 1, G 1.5, open-loop multisine,
+    16384 counts, 1 kHz): M -15 %, Fv +12 %, Fc -21 %, nothing reported.
     """
 
     name = "rigid_axis"
@@ -319,8 +341,10 @@ class RigidAxis(GreyBoxModel):
     inputs = ("tau",)
     positions = ("q",)
     equation_names = ("tau",)
-    parameter_names = ("M", "Fv", "offset")
-    optional_terms = ("offset",)
+    parameter_names = ("M", "Fv", "offset", "G", "Gc")
+    # tested in this order, each with the later ones still in (the cosine's mean over the
+    # motion is what a constant would fit: the cosine first, as on the flexible joint)
+    optional_terms = ("G", "Gc", "offset")
     bounds = {"M": (0.0, INF), "Fv": (0.0, INF)}
     viscous = {"tau": ("Fv", "q_d")}
     offset = {"tau": "offset"}
@@ -340,9 +364,22 @@ class RigidAxis(GreyBoxModel):
                                  f"with a position in m, or a torque in N m with an angle in "
                                  f"rad")
 
+    def ruled_out(self, units: dict) -> dict:
+        """A linear axis (position in m or force in N declared): no gravity terms."""
+        qu, tu = units.get("q"), units.get("tau")
+        if (qu and same_unit(qu, "m")) or (tu and same_unit(tu, "N")):
+            why = ("a linear axis (force in N, position in m): its weight is the constant "
+                   "offset, sin q and cos q have no meaning")
+            return {"G": why, "Gc": why}
+        return {}
+
+    def derived(self, theta: dict) -> dict:
+        return gravity_derived(theta)
+
     def equations(self, s: dict) -> dict:
         one = np.ones_like(floats(s["q_d"]))
-        return {"tau": (s["tau"], {"M": s["q_dd"], "Fv": s["q_d"], "offset": one})}
+        return {"tau": (s["tau"], {"M": s["q_dd"], "Fv": s["q_d"], "offset": one,
+                                   "G": np.sin(s["q"]), "Gc": np.cos(s["q"])})}
 
 
 class FlexibleJoint(GreyBoxModel):
@@ -406,11 +443,7 @@ class FlexibleJoint(GreyBoxModel):
         equation and ``-Ks delta`` on the link's) and the torque measurement's offset (what the
         motor equation's constant holds beyond the preload). A constant load on the link reads
         as a preload: the record cannot tell them apart."""
-        out = {}
-        g, gc = float(theta.get("G", 0.0)), float(theta.get("Gc", 0.0))
-        if gc:
-            out["gravity_amplitude"] = float(np.hypot(g, gc))
-            out["gravity_zero_rad"] = float(np.arctan2(gc, g))
+        out = gravity_derived(theta)
         om, ol, ks = (float(theta.get(k, 0.0)) for k in ("offset_m", "offset_l", "Ks"))
         if ol and ks > 0:
             out["encoder_zero_offset_rad"] = -ol / ks

@@ -24,6 +24,11 @@ def emps_path(name: str = "DATA_EMPS") -> Path:
     return real_record(f"emps/{name}.mat")
 
 
+# the EMPS axis is prismatic: force gtau * vir in N, position qm in m (its weight is the
+# constant offset; no gravity terms: residual.analyse's ``units``)
+EMPS_UNITS = {"tau": "N", "q": "m"}
+
+
 def load_emps(name: str = "DATA_EMPS", path=None) -> dict:
     """Load an EMPS record (``path`` overrides the shared-data location)."""
     p = Path(path) if path is not None else emps_path(name)
