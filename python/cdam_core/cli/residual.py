@@ -268,6 +268,10 @@ def _summary(js: dict) -> list[str]:
         out.append(f"  {k} {v:.5g} ({rel})")
     for k, v in (js.get("derived_parameters") or {}).items():
         out.append(f"  derived: {k} {v:.5g}")
+    for d in st.get("declared_terms_dropped") or ():
+        for e in d.get("exchangeable_with") or ():
+            out.append(f"  not separable on this record: {d['term']} and {e['term']} "
+                       f"(p {e['p_value']:.2g}): what is derived from either is undetermined")
     for f in js["findings"]:
         out.append(f"found {f['effect']} on {f['channel']}: {f['parameters']}")
     val = st.get("validation") or {}

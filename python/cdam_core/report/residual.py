@@ -257,6 +257,13 @@ def write_report(sel: Selection, out_dir, title: str | None = None, source: str 
     if dropped:
         lines += ["", "Declared terms the held-out data do not support (fixed at 0): "
                   + ", ".join(f"{d['term']} (p {d['p_value']:.2g})" for d in dropped) + "."]
+    pairs = [(d["term"], e["term"], e["p_value"]) for d in dropped
+             for e in d.get("exchangeable_with") or ()]
+    if pairs:
+        lines += ["", "Not separable on this record (the held-out windows do not prefer one of "
+                  "the two): " + ", ".join(f"{a} and {b} (p {p:.2g})" for a, b, p in pairs)
+                  + "; the one kept holds both, and a quantity derived from either is "
+                  "undetermined here."]
     ruled = sel.settings.get("declared_terms_ruled_out") or []
     if ruled:
         lines += ["", "Declared terms the units rule out (fixed at 0): "

@@ -287,7 +287,27 @@ def drop_unsupported_terms(model, sig, current: Fit, cv, alpha: float, trim: int
                             "p_value": v.p_value, "validation": v.to_json()})
             model = reduced
             current = fit(model, sig, current.effects, trim)
+    _exchangeable(model, current, cv, alpha, terms, dropped)
     return model, current, dropped
+
+
+def _exchangeable(model, current: Fit, cv, alpha: float, terms: list, dropped: list) -> None:
+    """Each dropped term against each kept one: where the model with the dropped term in the
+    kept one's place predicts the held-out windows no worse (the kept model not better, one-
+    sided Wilcoxon, Bonferroni over the pairs), the record cannot tell the two apart (a
+    constant and ``Gc cos q`` over a swing where the cosine's curvature is below the noise):
+    the dropped entry gets ``"exchangeable_with"`` [{"term", "p_value"}], the derived
+    quantities that read either term are undetermined, and the report says so. Measured on a
+    pendulum under PD control (500 Hz, swing 1 rad, the encoder's zero 0.3 rad off hanging):
+    the constant kept in Gc's place, the zero's angle read as 0."""
+    kept = [p for p in terms if p not in {d["term"] for d in dropped}]
+    pairs = [(d, k) for d in dropped for k in kept]
+    for d, k in pairs:
+        fixed = {q: v for q, v in model.fixed.items() if q != d["term"]}
+        swap = type(model)({**fixed, k: 0.0})
+        v = cv.compare((current.effects, swap), (current.effects, model), len(pairs), alpha)
+        if not v.better:
+            d.setdefault("exchangeable_with", []).append({"term": k, "p_value": v.p_value})
 
 
 def free_run_check(cv, path, final, alpha: float) -> dict:
