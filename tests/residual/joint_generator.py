@@ -136,6 +136,17 @@ class Joint:
         return {"t": t, "tau_m": tau, "theta_m": thm_m, "q": q_m, "truth": self.truth()}
 
 
+def _rk4_held(f, x, uk, h, sub):
+    """``sub`` classical RK4 steps of ``h`` of x' = f(x, uk), the input held."""
+    for _ in range(sub):
+        k1 = f(x, uk)
+        k2 = f(x + 0.5 * h * k1, uk)
+        k3 = f(x + 0.5 * h * k2, uk)
+        k4 = f(x + h * k3, uk)
+        x = x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+    return x
+
+
 def rigid_axis(fs=1000.0, duration=20.0, M=0.5, Fv=2.0, Fc=1.0, offset=0.0, counts=0,
                noise=0.0, seed=0, bias=0.0, G=0.0, zero=0.0) -> dict:
     """A rigid axis M q'' + Fv q' + Fc tanh(q' / 1 mrad/s) + offset + G sin(q + zero) = tau,
@@ -160,12 +171,7 @@ def rigid_axis(fs=1000.0, duration=20.0, M=0.5, Fv=2.0, Fc=1.0, offset=0.0, coun
     h = dt / sub
     for k in range(n):
         q[k] = x[0]
-        for _ in range(sub):
-            k1 = f(x, u[k])
-            k2 = f(x + 0.5 * h * k1, u[k])
-            k3 = f(x + 0.5 * h * k2, u[k])
-            k4 = f(x + h * k3, u[k])
-            x = x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+        x = _rk4_held(f, x, u[k], h, sub)
     if counts:
         res = 2 * np.pi / counts
         q = np.round(q / res) * res
@@ -202,12 +208,7 @@ def pd_pendulum(fs=500.0, duration=20.0, M=0.5, Fv=2.0, Fc=1.0, G=1.5, zero=0.3,
         q[k] = np.round(x[0] / res) * res
         v = 0.0 if k == 0 else (q[k] - q[k - 1]) / dt
         tau[k] = kp * (ref[k] - q[k]) - kd * v
-        for _ in range(sub):
-            k1 = f(x, tau[k])
-            k2 = f(x + 0.5 * h * k1, tau[k])
-            k3 = f(x + 0.5 * h * k2, tau[k])
-            k4 = f(x + h * k3, tau[k])
-            x = x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+        x = _rk4_held(f, x, tau[k], h, sub)
     return {"t": t, "tau": tau, "q": q,
             "truth": {"M": M, "Fv": Fv, "Fc": Fc, "G": G, "zero": zero}}
 
