@@ -136,6 +136,21 @@ class Joint:
         return {"t": t, "tau_m": tau, "theta_m": thm_m, "q": q_m, "truth": self.truth()}
 
 
+def _grid(fs, duration):
+    """(dt, samples, times) of a record at ``fs`` Hz lasting ``duration`` s."""
+    dt = 1.0 / fs
+    n = int(round(duration * fs))
+    return dt, n, np.arange(n) * dt
+
+
+def _multisine(rng, t, freqs, amp, roll):
+    """sum_i amp sin(2 pi f_i t + phase_i) / (1 + roll f_i), phases uniform from ``rng``."""
+    freqs = np.array(freqs)
+    ph = rng.uniform(0, 2 * np.pi, freqs.size)
+    return np.sum(amp * np.sin(2 * np.pi * freqs[None, :] * t[:, None] + ph)
+                  / (1 + roll * freqs), axis=1)
+
+
 def _rk4_held(f, x, uk, h, sub):
     """``sub`` classical RK4 steps of ``h`` of x' = f(x, uk), the input held."""
     for _ in range(sub):
@@ -154,13 +169,8 @@ def rigid_axis(fs=1000.0, duration=20.0, M=0.5, Fv=2.0, Fc=1.0, offset=0.0, coun
     grid. ``G``: a rotary axis in a vertical plane (a pendulum), its encoder's zero ``zero``
     rad from the hanging position (it starts hanging, at q = -zero)."""
     rng = np.random.default_rng(seed)
-    dt = 1.0 / fs
-    n = int(round(duration * fs))
-    t = np.arange(n) * dt
-    freqs = np.array([0.3, 0.7, 1.3, 3.1, 6.0])
-    ph = rng.uniform(0, 2 * np.pi, freqs.size)
-    u = np.sum(3.0 * np.sin(2 * np.pi * freqs[None, :] * t[:, None] + ph) / (1 + freqs), axis=1)
-    u = u + bias
+    dt, n, t = _grid(fs, duration)
+    u = _multisine(rng, t, (0.3, 0.7, 1.3, 3.1, 6.0), 3.0, 1.0) + bias
 
     def f(x, uk):
         return np.array([x[1], (uk - offset - G * np.sin(x[0] + zero) - Fv * x[1]
@@ -188,13 +198,8 @@ def pd_pendulum(fs=500.0, duration=20.0, M=0.5, Fv=2.0, Fc=1.0, G=1.5, zero=0.3,
     multisine reference (0.2-4.7 Hz), the velocity by backward difference; the torque held over
     each sample, RK4 on a fine grid; it starts hanging (q = -zero)."""
     rng = np.random.default_rng(seed)
-    dt = 1.0 / fs
-    n = int(round(duration * fs))
-    t = np.arange(n) * dt
-    freqs = np.array([0.2, 0.5, 1.1, 2.3, 4.7])
-    ph = rng.uniform(0, 2 * np.pi, freqs.size)
-    ref = np.sum(0.25 * np.sin(2 * np.pi * freqs[None, :] * t[:, None] + ph)
-                 / (1 + 0.5 * freqs), axis=1)
+    dt, n, t = _grid(fs, duration)
+    ref = _multisine(rng, t, (0.2, 0.5, 1.1, 2.3, 4.7), 0.25, 0.5)
 
     def f(x, uk):
         return np.array([x[1], (uk - G * np.sin(x[0] + zero) - Fv * x[1]
