@@ -4,8 +4,11 @@
 # marked fuzz, run by hand: pytest -m fuzz tests/robust).
 set -euo pipefail
 cd "$(dirname "$0")/.."
+# each phase prints the seconds since the start (the CI budget: under 20 minutes in all)
+phase() { echo "== [$SECONDS s] $1"; }
+phase "set-up"
 bash scripts/setup.sh --tests    # the firmware tools too: the firmware tests run here
-echo "== C++ unit tests (ctest)"
+phase "C++ unit tests (ctest)"
 .venv/bin/cmake -S . -B build/ctest -G Ninja -DCDAM_PYTHON=OFF -DCDAM_TESTS=ON \
   -DPython_EXECUTABLE="$PWD/.venv/bin/python" > build/ctest.log 2>&1 \
   || { cat build/ctest.log; exit 1; }
@@ -13,9 +16,9 @@ echo "== C++ unit tests (ctest)"
 (cd build/ctest && ../../.venv/bin/ctest --output-on-failure > ../ctest-run.log 2>&1) \
   || { cat build/ctest-run.log; exit 1; }
 tail -n 3 build/ctest-run.log
-echo "== C++ unit tests and a hypothesis pass over _core under AddressSanitizer + UBSan"
+phase "C++ unit tests and a hypothesis pass over _core under AddressSanitizer + UBSan"
 bash scripts/sanitize.sh
-echo "== Python tests (pytest)"
+phase "Python tests (pytest)"
 # Two workers (the machine's two cores), one test file per worker at a time (--dist loadfile:
 # a file's module fixtures build once); then the wall-clock load tests (marked realtime) alone.
 # -rs: why each skip; --durations: the slowest (CI budget). numpy's BLAS on one thread per
@@ -25,6 +28,7 @@ echo "== Python tests (pytest)"
 OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 \
 .venv/bin/python -m pytest -m "not fuzz and not soak and not realtime" -n 2 --dist loadfile \
   -q -rs --durations=30 -p no:cacheprovider "$@" tests
-echo "== Python wall-clock load tests (pytest -m realtime, alone on the machine)"
+phase "Python wall-clock load tests (pytest -m realtime, alone on the machine)"
 .venv/bin/python -m pytest -m "realtime and not fuzz and not soak" -q -rs -p no:cacheprovider \
   "$@" tests || [ $? -eq 5 ]   # 5: none selected (arguments that pick other tests)
+phase "done"
