@@ -8,15 +8,7 @@ cd "$(dirname "$0")/.."
 phase() { echo "== [$SECONDS s] $1"; }
 phase "set-up"
 bash scripts/setup.sh --tests    # the firmware tools too: the firmware tests run here
-phase "C++ unit tests (ctest)"
-.venv/bin/cmake -S . -B build/ctest -G Ninja -DCDAM_PYTHON=OFF -DCDAM_TESTS=ON \
-  -DPython_EXECUTABLE="$PWD/.venv/bin/python" > build/ctest.log 2>&1 \
-  || { cat build/ctest.log; exit 1; }
-.venv/bin/cmake --build build/ctest -j2 >> build/ctest.log 2>&1 || { cat build/ctest.log; exit 1; }
-(cd build/ctest && ../../.venv/bin/ctest --output-on-failure > ../ctest-run.log 2>&1) \
-  || { cat build/ctest-run.log; exit 1; }
-tail -n 3 build/ctest-run.log
-phase "C++ unit tests and a hypothesis pass over _core under AddressSanitizer + UBSan"
+phase "C++ unit tests (ctest) and a hypothesis pass over _core, under AddressSanitizer + UBSan"
 bash scripts/sanitize.sh
 phase "Python tests (pytest)"
 # Two workers (the machine's two cores), one test file per worker at a time (--dist loadfile:

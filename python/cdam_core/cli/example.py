@@ -95,10 +95,11 @@ def _simulation_error_baseline(sel, p: dict) -> list:
 
 def _lti_baseline() -> tuple:
     """The linear baseline fitted by simulation error (evaluate.lti_oe): a transfer function
-    from vir to qm, its order chosen on four held-out blocks of DATA_EMPS."""
-    from cdam_core.evaluate.lti_oe import emps_lti_baseline
+    from vir to qm, its order chosen on four held-out blocks of DATA_EMPS (the fewest
+    parameters within one standard error of the best held-out mean)."""
+    from cdam_core.evaluate.lti_oe import choose, emps_lti_baseline
     m, te, table = emps_lti_baseline(log=lambda *a: None)
-    v = min(r[0] for r in table)
+    v = choose(table)[0]
     return (f"LTI output error, order {m.n}{' + input offset' if m.offset else ''} chosen on "
             f"held-out blocks of DATA_EMPS (validation {v:.1f} mm)", te, "this run")
 
