@@ -12,13 +12,15 @@ phase "C++ unit tests (ctest) and a hypothesis pass over _core, under AddressSan
 bash scripts/sanitize.sh
 phase "Python tests (pytest)"
 # Two workers (the machine's two cores), one test file per worker at a time (--dist loadfile:
-# a file's module fixtures build once); then the wall-clock load tests (marked realtime) alone.
+# a file's module fixtures build once; the longest files first, tests/conftest.py, so that no
+# worker idles at the end); then the wall-clock load tests (marked realtime) alone.
 # -rs: why each skip; --durations: the slowest (CI budget). numpy's BLAS on one thread per
 # worker: two workers on two cores each with a multi-threaded BLAS oversubscribe the machine
 # (an analysis through residual.analyse measured 40 s against 12 s with one BLAS thread); the
 # CLI and the fleet's tasks already limit it the same way (threadpoolctl).
 OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 \
 .venv/bin/python -m pytest -m "not fuzz and not soak and not realtime" -n 2 --dist loadfile \
+  --no-loadscope-reorder \
   -q -rs --durations=30 -p no:cacheprovider "$@" tests
 phase "Python wall-clock load tests (pytest -m realtime, alone on the machine)"
 .venv/bin/python -m pytest -m "realtime and not fuzz and not soak" -q -rs -p no:cacheprovider \
