@@ -33,6 +33,15 @@ enum Op : int {
   kMin, kGt, kLt, kGe, kLe, kPow, kExp, kSqrt, kNumOps
 };
 
+inline void sin_cos(double x, double* s, double* c) {
+#if defined(__GLIBC__)
+  ::sincos(x, s, c);
+#else
+  *s = std::sin(x);
+  *c = std::cos(x);
+#endif
+}
+
 double sign_of(double x) { return x > 0 ? 1.0 : (x < 0 ? -1.0 : (x == 0 ? 0.0 : x)); }
 double max_of(double a, double b) { return (a != a || b != b) ? NAN : (a >= b ? a : b); }
 double min_of(double a, double b) { return (a != a || b != b) ? NAN : (a <= b ? a : b); }
@@ -45,6 +54,9 @@ struct Tape {
   int nodes;
   const int* out;   // equation error nodes, one per position
   int n;            // positions
+  // sin and cos of one operand, evaluated together (sincos, the same values bit for bit in
+  // glibc): trig[i] >= 0 at the first of the two names the second, -2 at the second (done)
+  const int* trig;
 };
 
 constexpr int kChunk = 32;   // lanes evaluated together (inner loops over lanes)
@@ -88,8 +100,20 @@ void accel(const Tape& tp, int B, const double* x, const double* v, const double
       case kNeg: for (int l = 0; l < B; ++l) y[l] = -ra[l]; break;
       case kSign: for (int l = 0; l < B; ++l) y[l] = sign_of(ra[l]); break;
       case kTanh: for (int l = 0; l < B; ++l) y[l] = std::tanh(ra[l]); break;
-      case kSin: for (int l = 0; l < B; ++l) y[l] = std::sin(ra[l]); break;
-      case kCos: for (int l = 0; l < B; ++l) y[l] = std::cos(ra[l]); break;
+      case kSin:
+      case kCos:
+        if (tp.trig[i] == -2) break;            // its pair's first node filled it
+        if (tp.trig[i] >= 0) {
+          double* y2 = reg + static_cast<std::size_t>(tp.trig[i]) * kChunk;
+          double* ys = tp.op[i] == kSin ? y : y2;
+          double* yc = tp.op[i] == kSin ? y2 : y;
+          for (int l = 0; l < B; ++l) sin_cos(ra[l], ys + l, yc + l);
+        } else if (tp.op[i] == kSin) {
+          for (int l = 0; l < B; ++l) y[l] = std::sin(ra[l]);
+        } else {
+          for (int l = 0; l < B; ++l) y[l] = std::cos(ra[l]);
+        }
+        break;
       case kAbs: for (int l = 0; l < B; ++l) y[l] = std::fabs(ra[l]); break;
       case kMax: for (int l = 0; l < B; ++l) y[l] = max_of(ra[l], rb[l]); break;
       case kMin: for (int l = 0; l < B; ++l) y[l] = min_of(ra[l], rb[l]); break;
@@ -182,7 +206,18 @@ void register_greybox(py::module_& m) {
         const long long* st = starts.data();
         for (int l = 0; l < L; ++l)
           if (st[l] < 0 || st[l] + steps > N) value_error("starts/steps: rows outside the series");
-        const Tape tp{opp, ap, bp, cp, static_cast<int>(nodes), outputs.data(), n};
+        std::vector<int> trig(static_cast<std::size_t>(nodes), -1);
+        for (py::ssize_t i = 0; i < nodes; ++i) {
+          if ((opp[i] != kSin && opp[i] != kCos) || trig[i] != -1) continue;
+          const int want = opp[i] == kSin ? kCos : kSin;
+          for (py::ssize_t j = i + 1; j < nodes; ++j)
+            if (opp[j] == want && ap[j] == ap[i] && trig[j] == -1) {
+              trig[i] = static_cast<int>(j);
+              trig[j] = -2;
+              break;
+            }
+        }
+        const Tape tp{opp, ap, bp, cp, static_cast<int>(nodes), outputs.data(), n, trig.data()};
         const int per = L / G;
         py::array_t<double> result =
             path ? py::array_t<double>({static_cast<py::ssize_t>(steps), static_cast<py::ssize_t>(L),

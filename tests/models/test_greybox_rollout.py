@@ -527,3 +527,40 @@ def test_which_coordinates_stick():
 def _parameter_names_of(g, m):
     from cdam_core.models.greybox.augmented import _parameter_names
     return sorted(_parameter_names(m, g.effects, g))
+
+
+def test_sine_and_cosine_of_one_operand_in_any_order():
+    """The kernel evaluates sin and cos of the same node together (sincos): a tape with cos
+    before sin of x, a second sin of x (left unpaired), sin of v and cos of a sum, one
+    semi-implicit Euler step of every lane against numpy."""
+    from cdam_core import _core
+    ops, a, b, c = [], [], [], []
+
+    def node(op, x=-1, y=-1, k=0.0):
+        ops.append(tr.OPS.index(op))
+        a.append(x)
+        b.append(y)
+        c.append(k)
+        return len(ops) - 1
+    x, v = node("X", k=0), node("V", k=0)
+    p = [node("P", k=i) for i in range(5)]
+    cx, sx, sx2, sv = node("cos", x), node("sin", x), node("sin", x), node("sin", v)
+    cs = node("cos", node("add", x, v))
+    terms = [node("mul", p[i], t) for i, t in enumerate((cx, sx, sx2, sv, cs))]
+    acc = terms[0]
+    for t in terms[1:]:
+        acc = node("add", acc, t)
+    rng = np.random.default_rng(4)
+    L, h = 70, 0.01
+    th = rng.standard_normal((L, 5))
+    x0, v0 = 3.0 * rng.standard_normal((L, 1)), rng.standard_normal((L, 1))
+    got, div = _core.greybox_rollout(
+        np.array(ops, np.int32), np.array(a, np.int32), np.array(b, np.int32),
+        np.array(c, float), np.array([acc], np.int32), np.zeros((3, 1)), th,
+        np.ones((L, 1, 1)), x0, v0, np.zeros(L, np.int64), 1, 1, False, h, 0.0, False)
+    X, V = x0[:, 0], v0[:, 0]
+    want_acc = (th[:, 0] * np.cos(X) + th[:, 1] * np.sin(X) + th[:, 2] * np.sin(X)
+                + th[:, 3] * np.sin(V) + th[:, 4] * np.cos(X + V))
+    want = X + h * (V + h * want_acc)
+    assert div == -1
+    np.testing.assert_allclose(got[:, 0], want, rtol=1e-14, atol=1e-15)
