@@ -599,7 +599,8 @@ def test_dry_and_viscous_friction_of_the_readme_joint_within_2_percent(seed):
     0 / 2): the switching sign's linearisation error is larger for the truth. The final
     estimate now fits the windows' states beside the parameters (output_error.joint_refine):
     measured every parameter within 0.4 % on seed 0 and 0.45 % on seed 2. Expected values:
-    the generator's truth. (About 15 s each.)"""
+    the generator's truth. (About 42 s of CPU each with one BLAS thread;
+    42-67 s in CI on two busy workers, session 17.)"""
     r, sel = _readme_joint(seed)
     assert sel.settings["estimator"]["chosen"] == "output error (multiple shooting)"
     assert "joint" not in sel.settings["estimator"]["refinement"]     # it ran
@@ -615,7 +616,7 @@ def test_readme_joint_dry_friction_decided_on_the_chosen_estimators_fold_fits():
     found, Dm +27 % (the viscous term took it). Compared on the fold fits of the estimator the
     windows choose for the declared model (output error there) it is found at p 3e-9.
     Expected values: the generator's truth, friction on the motor equation and Fc, Dm within
-    5 % (the issue's bound). (About 18 s.)"""
+    5 % (the issue's bound). (About 40-50 s in CI, session 17.)"""
     r, sel = _readme_joint(6)
     assert sel.settings["structures_compared_by"]["chosen"] == "output error (multiple shooting)"
     assert ("coulomb_friction", "tau_m") in _found(sel)
