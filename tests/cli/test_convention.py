@@ -102,6 +102,26 @@ def test_identify_without_options_runs_one_algorithm_one_seed_and_leads_with_bas
     assert arx["rmse"] == pytest.approx(np.sqrt(np.mean((pred - yt) ** 2)), rel=1e-6)
 
 
+def test_identify_says_whether_the_model_is_below_the_best_baseline(tmp_path):
+    """Under each table, one line: the best baseline's mean NRMSE (naive or ARX, whichever is
+    lower in the JSON) and whether the model's is below it, recomputed from the JSON."""
+    import json
+    _small_record(tmp_path)
+    r = _cdam("identify", tmp_path / "small.csv", "--smoothing", "0", "--algo", "bp",
+              "--hidden", "3", "--epochs", "3", "--json", tmp_path / "r.json")
+    assert r.returncode == 0, r.stderr
+    js = json.loads((tmp_path / "r.json").read_text())
+    model = js["summary"]["bp"]["records"]["test"]["one_step"]["y"]["nrmse"]["mean"]
+    base = {"naive": js["baselines"]["test"]["naive"]["one_step"]["y"]["nrmse"],
+            "ARX": js["baselines"]["test"]["arx"]["one_step"]["y"]["nrmse"]}
+    name = min(base, key=base.get)
+    lines = [ln for ln in r.stdout.splitlines() if ln.startswith("  -> ")]
+    assert len(lines) == 1, r.stdout
+    assert f"best baseline ({name}" in lines[0] and f", {base[name]:.3f}):" in lines[0]
+    assert lines[0].endswith("below" if model < base[name] else "NOT below")
+    assert (" NOT below" in lines[0]) == (model >= base[name])
+
+
 def test_notes_and_progress_stay_off_stdout(tmp_path):
     """Piped (not a TTY): no progress bar at all; notes on stderr, silenced by --quiet."""
     _small_record(tmp_path)

@@ -46,11 +46,27 @@ def _cell(r, nrmse) -> str:
             f"NRMSE {'n/a' if nrmse is None else format(nrmse, '.3f')}")
 
 
+def _verdict(models: list, baselines: list) -> list[str]:
+    """One line: whether each model's mean NRMSE over the outputs is below the best of the
+    baselines' (naive, ARX) on this record and mode; nothing without a finite baseline."""
+    base = [(label, _mean_over_outputs(m, "nrmse")) for label, m, _ in baselines if m is not None]
+    base = [(label, v) for label, v in base if v is not None]
+    if not base:
+        return []
+    bl, bv = min(base, key=lambda b: b[1])
+    out = []
+    for label, m, _ in models:
+        v = None if m is None else _mean_over_outputs(m, "nrmse")
+        out.append(f"{label} {'n/a' if v is None else ('below' if v < bv else 'NOT below')}")
+    return [f"  -> mean NRMSE against the best baseline ({bl}, {bv:.3f}): " + ", ".join(out)]
+
+
 def headline(result: dict) -> list[str]:
     """The lines ``cdam identify`` leads with: on the validation record (else the test record),
     each algorithm's mean r and NRMSE over outputs in free run (one step for a static map)
     beside the naive and least-squares ARX baselines (``result["baselines"]``, see
-    ``evaluate.baselines.naive_and_arx``), then one step, then the training fitness."""
+    ``evaluate.baselines.naive_and_arx``) and whether each is below the best of them, then one
+    step, then the training fitness."""
     summary, base = result["summary"], result.get("baselines") or {}
     first = next(iter(summary.values()))["records"]
     rec = "validation" if "validation" in first else "test"
@@ -73,6 +89,7 @@ def headline(result: dict) -> list[str]:
             cell = "n/a" if m is None else _cell(_mean_over_outputs(m, "r"),
                                                   _mean_over_outputs(m, "nrmse"))
             lines.append(f"  {label:<14} {cell}" + (f"   ({why})" if why else ""))
+        lines += _verdict(rows[:len(summary)], rows[len(summary):])
     lines.append("training fitness 1/(1+MSE), normalised units (not a validation score): "
                  + ", ".join(f"{_LABEL[a]} {_fmt(s['fitness'])}" for a, s in summary.items()))
     lines.append("time per run: " + ", ".join(f"{_LABEL[a]} {_fmt(s['seconds'], 2)} s"
