@@ -52,16 +52,24 @@ def _simulate(theta, n, offset, u, y_window):
     a, b, c = _split(theta, n, offset)
     k = len(y_window)
     forced = lfilter(b, a, u[:k] + c)
-    x0, *_ = np.linalg.lstsq(_free_basis(a, b, k), y_window - forced, rcond=None)
+    x0, *_ = np.linalg.lstsq(_free_basis(_impulse(a, k), n), y_window - forced, rcond=None)
     return lfilter(b, a, u + c, zi=x0)[0]
 
 
-def _free_basis(a, b, m):
-    """(m, n): the free responses over m samples from each unit initial state (lfilter's
-    state), all n in one filter run along the rows."""
-    n = len(a) - 1
-    bb = np.concatenate([b, np.zeros(max(0, len(a) - len(b)))])
-    return lfilter(bb, a, np.zeros((n, m)), axis=-1, zi=np.eye(n))[0].T
+def _impulse(a, m):
+    """The first m samples of the impulse response of 1 / A."""
+    imp = np.zeros(m)
+    imp[0] = 1.0
+    return lfilter([1.0], a, imp)
+
+
+def _free_basis(h, n):
+    """(len(h), n): the free responses from each unit initial state of lfilter (its
+    transposed direct form): the impulse response h of 1 / A delayed by 0..n-1 samples."""
+    G = np.zeros((len(h), n))
+    for j in range(n):
+        G[j:, j] = h[:len(h) - j]
+    return G
 
 
 def _simulate_jac(theta, n, offset, u, y_window):
@@ -78,12 +86,8 @@ def _simulate_jac(theta, n, offset, u, y_window):
     k, N = len(y_window), len(u)
     v = u + c
     w = lfilter([1.0], a, v)                       # v / A
-    imp = np.zeros(N)
-    imp[0] = 1.0
-    h = lfilter([1.0], a, imp)                     # impulse response of 1 / A
-    Gw = np.zeros((k, n))
-    for j in range(n):
-        Gw[j:, j] = h[:k - j]
+    h = _impulse(a, N)                             # impulse response of 1 / A
+    Gw = _free_basis(h[:k], n)
     f_w = lfilter(b, a, v[:k])
     x0, *_ = np.linalg.lstsq(Gw, y_window - f_w, rcond=None)
     s = lfilter(b, a, v, zi=x0)[0]                 # the free run (_simulate)
@@ -261,7 +265,7 @@ def select(u, y, orders=(1, 2, 3, 4, 5), n_blocks=4, patience=2, log=print):
         raise ValueError(f"orders: must be integers >= 1, got {orders!r}")
     if int(patience) != patience or patience < 1:
         raise ValueError(f"patience: must be an integer >= 1, got {patience!r}")
-    orders = sorted(int(k) for k in orders)
+    orders = sorted({int(k) for k in orders})
     u, y = np.asarray(u, float), np.asarray(y, float)
     if u.ndim != 1 or u.shape != y.shape:
         raise ValueError(f"u, y: must be 1-D of equal length, got {u.shape} and {y.shape}")
