@@ -53,6 +53,10 @@ class Joint:
     tau_bias: float = 0.0           # N m, the torque measurement's offset (a current sensor's)
     substeps: int = 4
     hold: bool = True               # False (open loop only): a continuous torque, sampled
+    # ("chirp", f1): a logarithmic sweep from 0.1 Hz to f1 Hz over the record plus a 0.23 Hz
+    # sine of 0.3 its amplitude, scaled to unit standard deviation, in place of the multisine
+    excitation: tuple = ()
+    gains: tuple = ()               # (kp, kd) of the PD loop in place of the defaults
     seed: int = 0
     params: dict = field(default_factory=lambda: dict(TRUTH))
 
@@ -92,6 +96,14 @@ class Joint:
         freqs = np.array([0.2, 0.45, 0.9, 1.7, 3.1, 5.3, 8.0])
         ph = rng.uniform(0, 2 * np.pi, freqs.size)
         ref = np.sum(np.sin(2 * np.pi * freqs[None, :] * t[:, None] + ph) / (1 + freqs), axis=1)
+        if self.excitation:
+            if self.excitation[0] != "chirp" or not self.hold:
+                raise ValueError("excitation: only ('chirp', f1), with the torque held")
+            f0, f1 = 0.1, float(self.excitation[1])
+            rate = np.log(f1 / f0) / self.duration
+            ref = (np.sin(2 * np.pi * f0 * np.expm1(rate * t) / rate)
+                   + 0.3 * np.sin(2 * np.pi * 0.23 * t))
+            ref = ref / np.std(ref)
         h = dt / self.substeps
         skew_steps = int(round(self.skew / h))
         hist_q = [0.0] * (skew_steps + 1)   # fine-grid link angles for the skewed latch
@@ -111,7 +123,7 @@ class Joint:
                 r = 0.5 * ref[k]
                 vel = 0.0 if prev is None else (y - prev) / dt
                 prev = y
-                kp, kd = (2.0, 0.08) if self.control == "motor" else (1.0, 0.1)
+                kp, kd = self.gains or ((2.0, 0.08) if self.control == "motor" else (1.0, 0.1))
                 u = kp * (r - y) - kd * vel
                 if self.plane == "vertical":
                     u += self.G * np.sin(r + self.zero)   # gravity feed-forward

@@ -236,8 +236,11 @@ def _summary(js: dict) -> list[str]:
     st = js.get("settings", {})
     out = [f"model {js['model']}"]
     if (tm := st.get("timing")) and "chosen" in tm:
-        p = tm.get("p_value")
-        out.append(f"input timing: {tm['chosen']}" + (f" (p {p:.2g})" if p is not None else ""))
+        p = tm.get("p_value" if tm["chosen"] == "held" else "p_value_sampled",
+                   tm.get("p_value"))
+        out.append(f"input timing: {tm['chosen']}" + (
+            "" if p is None else f" (p {p:.2g})" if tm.get("decided", True)
+            else f" (undecided, p {p:.2g}: the zero-order hold kept)"))
         if tm.get("warning"):
             out.append(f"  warning: {tm['warning']}")
     cut = (st.get("filter_choice") or {}).get("chosen_hz")

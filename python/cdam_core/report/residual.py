@@ -201,7 +201,11 @@ def write_report(sel: Selection, out_dir, title: str | None = None, source: str 
     if tm:
         why = (f"held-out equation error {tm['held_out_error']['sampled']:.4g} (sampled) against "
                f"{tm['held_out_error']['held']:.4g} (held) over {tm['windows']} windows, "
-               f"one-sided Wilcoxon p {tm['p_value']:.2g}" if tm.get("status") == "ok"
+               f"Wilcoxon p {tm['p_value']:.2g} (held better), "
+               f"{tm.get('p_value_sampled', float('nan')):.2g} (sampled better)"
+               + ("" if tm.get("decided", True) else
+                  ": neither at the level, the documented zero-order hold kept")
+               if tm.get("status") == "ok"
                else tm.get("reason") or tm.get("rule", ""))
         lines += [f"Input timing: **{tm['chosen']}** "
                   + ("(the state half a sample after each input sample: a zero-order hold)"

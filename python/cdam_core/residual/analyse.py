@@ -102,7 +102,7 @@ def analyse(model: str, t, signals: dict, extra: dict | None = None, fixed: dict
             50 if trim is None else trim, alpha)
     else:
         timing_info = {"chosen": timing, "rule": "given"}
-        if timing == "sampled" and not getattr(m, "fixed_bands", False):
+        if not getattr(m, "fixed_bands", False):
             # a given timing is used, but what the record says is reported beside it: on a
             # zero-order-hold record analysed as "sampled" the half-sample timing error is
             # absorbed by whatever column resembles it (exact-ZOH frictionless axis, 40-60 s:
@@ -110,12 +110,15 @@ def analyse(model: str, t, signals: dict, extra: dict | None = None, fixed: dict
             # timing the record chooses, "held" at p ~3e-20, none)
             rec, rec_info = choose_timing(m, lambda tm: m.prepare(t, signals, filt, extra, tm),
                                           dec, 50 if trim is None else trim, alpha)
-            timing_info["record"] = {"chosen": rec, **({"p_value": rec_info["p_value"]}
-                                                       if "p_value" in rec_info else {})}
-            if rec != timing:
+            timing_info["record"] = {"chosen": rec, "decided": bool(rec_info.get("decided")),
+                                     **{k: rec_info[k] for k in ("p_value", "p_value_sampled")
+                                        if k in rec_info}}
+            if rec != timing and rec_info.get("decided"):
+                p_rec = rec_info["p_value" if rec == "held" else "p_value_sampled"]
                 timing_info["warning"] = (
-                    f"the record's held-out equations prefer the {rec} timing (a zero-order "
-                    f"hold, p {rec_info['p_value']:.2g}): a finding may be the half-sample "
+                    f"the record's held-out equations prefer the {rec} timing ("
+                    + ("a zero-order hold" if rec == "held" else "the input at its sample "
+                       "instant") + f", p {p_rec:.2g}): a finding may be the half-sample "
                     "timing error")
     sig = m.prepare(t, signals, filt, extra, timing)
     check = None

@@ -112,7 +112,10 @@ def refine(g, U, Y, starts, shooting, bounds: dict) -> tuple[dict, dict]:
         g.set_parameters(dict(zip(names, x * scale)))
         try:
             e = np.asarray(shooting(g, U, Y, starts, samples=True), dtype=float)
-        except ValueError:                  # a diverging trial point: a large, finite error
+        except ValueError as exc:           # a diverging trial point: a large, finite error
+            if starts.size not in n_res:    # ... but the start itself: nothing to refine
+                raise ValueError(f"output error: the starting estimate's windows cannot be "
+                                 f"simulated ({exc})") from exc
             return np.full(n_res[starts.size], 1e3)
         e = e.reshape(starts.size, -1)
         n_res[starts.size] = e.size
