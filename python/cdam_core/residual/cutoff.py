@@ -18,7 +18,11 @@ exceedance per spectrum of 10^3 bins) one bin far above the motion set the cut-o
 independent generator's axis with long stops (Fc 2, 8192 counts, 500 Hz, seed 2) a single bin
 at 168 Hz among noise, where the motion ends near 12 Hz; the twice-differentiated angle was
 then noise, M came out at 0.4 % of the truth and Coulomb friction was not found), at most 0.4 x the sampling
-rate and at least the motion's own frequency (1 / the correlation time of the velocity). The
+rate and at least the motion's own frequency (:func:`motion_frequency`: the frequency of a
+sinusoid whose autocorrelation falls to 1/e at the velocities' correlation time, those read at
+each position's own noise cut-off; session 20 replaced 1 / the correlation time, read at a fixed
+100 Hz, which is 5.3 times a sinusoid's frequency and lifted a noisy link's cut-off into its
+noise: every parameter 12-15 % low on a link-PD joint, 64 % on a chattering one). The
 choice depends on the record only, not on the model structure being tested (a misspecified
 model would otherwise pick the filter that hides what it lacks).
 
@@ -223,18 +227,30 @@ def noise_cutoff(x, fs: float, lowest: float = 0.0) -> tuple[float, dict]:
                 "last_frequency_above_noise_hz": float(f[above[-1]]) if above.size else None}
 
 
+def motion_frequency(model, t, raw: dict, cut: dict, order: int = 4, extra=None) -> float:
+    """The motion's own frequency (Hz): that of a sinusoid whose autocorrelation falls to 1/e
+    at the velocities' correlation time (:func:`motion_horizon`, the longest over the
+    positions), arccos(1/e) / (2 pi horizon dt), about 0.19 / horizon. The velocities are
+    read each at its noise cut-off ``cut``. (Before session 20 the bound was 1 / horizon,
+    5.3 times a sinusoid's frequency, read at a fixed 100 Hz: on a link held by PD against a
+    4096-count encoder, its 11 Hz chatter put the link's cut-off at 50 Hz where its
+    spectrum meets the noise at 13 Hz, and every parameter came out 12-15 % low.)"""
+    dt = float(np.mean(np.diff(np.asarray(t, dtype=float))))
+    ref = model.prepare(t, raw, SignalFilters.of(cut, order), extra)
+    return float(np.arccos(1.0 / np.e) / (2 * np.pi * motion_horizon(ref, model.positions) * dt))
+
+
 def choose_cutoff(model, t, raw: dict, extra: dict | None = None, order: int = 4) -> tuple[DerivativeFilter, dict]:
     """Return (filter, report) for ``model`` on the record: one cut-off per position
     (:func:`noise_cutoff`); ``report`` holds each signal's evidence and the edge trim."""
     t = np.asarray(t, dtype=float)
     dt = float(np.mean(np.diff(t)))
     fs = 1.0 / dt
-    ref_fc = min(float(model.default_cutoff_hz), TOP * fs)
-    ref = model.prepare(t, raw, DerivativeFilter(ref_fc, order), extra)
-    lowest = 1.0 / (motion_horizon(ref, model.positions) * dt)
     cut, evidence = {}, {}
     for p in model.positions:
-        cut[p], evidence[p] = noise_cutoff(raw[p], fs, lowest)
+        cut[p], evidence[p] = noise_cutoff(raw[p], fs)
+    lowest = min(motion_frequency(model, t, raw, cut, order, extra), TOP * fs)
+    cut = {p: max(c, lowest) for p, c in cut.items()}
     filt = SignalFilters.of(cut, order)
     trim = edge_trim(min(cut.values()), fs)
     return filt, {"rule": "per position: the highest frequency where its spectrum exceeds the "
@@ -244,7 +260,8 @@ def choose_cutoff(model, t, raw: dict, extra: dict | None = None, order: int = 4
                           "beyond the "
                           f"chi-square quantile at {100 * LEVEL:g} % / the frequencies tested "
                           "(Bonferroni); within "
-                          f"[{lowest:.3g}, {TOP * fs:.4g}] Hz",
+                          f"[{lowest:.3g}, {TOP * fs:.4g}] Hz (the motion's own frequency, "
+                          "0.4 fs)",
                   "chosen_hz": {p: float(v) for p, v in cut.items()}, "signals": evidence,
                   "trim_samples": trim, "fs": fs, "order": int(order)}
 
