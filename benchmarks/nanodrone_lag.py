@@ -39,10 +39,10 @@ integrated model's attitude error at h = 50 (mean 0.655 rad at 200 ms) stays abo
 rates (0.580) -- the finding of the residual step in evaluate.crossfold.
 """
 import argparse
-import json
 import time
 
 import numpy as np
+from group_rows import fold_means, print_groups, write_json
 
 from cdam_core.evaluate.crossfold import TYPES, _split
 from cdam_core.evaluate.groups import NANODRONE_GROUPS
@@ -121,23 +121,14 @@ def main():
             print(f"{test_type} {rates}: lag {1000 * m.lag_:.0f} ms (delays {m.delays_}, "
                   f"lag 0: {models[(rates, 0.0)].delays_}); held-out scores "
                   + " ".join(f"{1000 * k:.0f}:{v:.2f}" for k, v in m.lag_fit_.items()))
-            for g, name in enumerate(names):
-                row = " ".join(f"h{h} {r0[h - 1, g]:.4f}/{r1[h - 1, g]:.4f}" for h in SHOW)
-                wins = int(np.sum(r1[:, g] < r0[:, g]))
-                print(f"   {name:9s} RMSE lag0/lag {row}  lag lower at {wins}/50")
+            print_groups(names, r0, r1, SHOW, "lag0/lag")
         print(f"   ({time.time() - t:.0f} s)", flush=True)
         out[test_type] = fold
     for rates in ("dynamic", "hold"):
-        r0 = np.mean([out[k][rates]["rmse_lag0"] for k in TYPES], axis=0)
-        r1 = np.mean([out[k][rates]["rmse_lag"] for k in TYPES], axis=0)
+        r0, r1 = fold_means(out, TYPES, rates, "rmse_lag0", "rmse_lag")
         print(f"mean over folds, {rates}:")
-        for g, name in enumerate(names):
-            row = " ".join(f"h{h} {r0[h - 1, g]:.4f}/{r1[h - 1, g]:.4f}" for h in SHOW)
-            print(f"   {name:9s} RMSE lag0/lag {row}  lag lower at "
-                  f"{int(np.sum(r1[:, g] < r0[:, g]))}/50")
-    if args.json:
-        with open(args.json, "w") as fh:
-            json.dump({"groups": names, "folds": out}, fh, indent=1)
+        print_groups(names, r0, r1, SHOW, "lag0/lag")
+    write_json(args.json, names, out)
 
 
 if __name__ == "__main__":

@@ -125,7 +125,10 @@ def test_commands_run_as_written_in_a_plain_clone(clone):
     stated = re.findall(r"(\w+) ([\d.]+) \(([\d.]+) %\)", stated)
     assert [k for k, _, _ in stated] == ["Im", "Dm", "Ks", "Kd", "I", "Dl", "G", "Fc"], stated
     for k, v, pct in stated:
-        assert _as_written(fin[k], v) and _as_written(100 * sd[k] / fin[k], pct), (k, fin[k], sd[k])
+        rel = 100 * sd[k] / fin[k]   # a sigma moves with its estimate (Kd: 0.2236 against 0.23)
+        assert _as_estimated(fin[k], v, sd[k]) and (_as_written(rel, pct) or
+                                                   abs(rel / float(pct) - 1) <= 0.05), \
+            (k, fin[k], sd[k])
     # the notebook, EMPS from the file in data/ to the report
     r = _bash(repo, env, _fenced("examples/emps_residual.ipynb"))
     assert r.returncode == 0, r.stderr[-3000:]
@@ -137,6 +140,16 @@ def _as_written(x: float, written: str) -> bool:
     """``x`` rounds to the README's ``written`` figure (within half its last digit)."""
     decimals = len(written.split(".")[1]) if "." in written else 0
     return abs(x - float(written)) <= 0.5 * 10.0 ** -decimals * (1 + 1e-9)
+
+
+def _as_estimated(x: float, written: str, sigma: float) -> bool:
+    """``x`` as written, or within half its own standard deviation of it (well inside the
+    estimate's uncertainty). An output-error estimate stops where the optimiser's tolerance is
+    met, and that point moves with the CPU's floating-point kernels (OpenBLAS picks them per
+    CPU): measured in session 20, the README joint's Dm 0.049949, Kd 0.049900 and G 0.59980
+    on one machine where the README, from another, prints 0.04993, 0.04989 and 0.5999 (0.12,
+    0.09 and 0.26 sigma), the same tree and inputs."""
+    return _as_written(x, written) or abs(x - float(written)) <= 0.5 * sigma
 
 
 def _nothing_tracked_changed(repo):
@@ -391,9 +404,14 @@ def test_emps_example_as_written_in_a_plain_clone(clone):
     iv, oe = est["validation"]["IDIM-IV"], est["validation"]["output error (multiple shooting)"]
     assert est["chosen"] == "IDIM-LS" and not iv["better"] and not oe["better"]
     assert f"is no better there (p {iv['p_value']:.3f} at level {iv['level']:g})" in text
+    # output error's windows move with the CPU (_as_estimated): the README's 52 % and p 0.024
+    # from one machine, 52.8 % and 0.0247 on another (session 20); the level is exact
     gain = 100 * (1 - oe["score_rich"] / oe["score_simple"])
-    assert f"held-out window error by {gain:.0f} %" in text
-    assert f"(Wilcoxon p {oe['p_value']:.3f} at level {oe['level']:g}" in text
+    said_gain = float(re.search(r"held-out window error by (\d+) %", text).group(1))
+    assert abs(gain - said_gain) <= 1.0, (gain, said_gain)
+    said_p = re.search(r"\(Wilcoxon p ([\d.]+) at level (\S+),", text).groups()
+    assert abs(oe["p_value"] - float(said_p[0])) <= 0.001, (oe["p_value"], said_p)
+    assert f"{oe['level']:g}" == said_p[1] and oe["p_value"] > oe["level"]
     assert js["settings"]["stability"]["stable"]
     # the residual's lines: the mains' near 50 Hz (DATA_EMPS) and 100 Hz (both) unexplained;
     # the 20.4 Hz line of both records within what the model's terms produce (listed as the

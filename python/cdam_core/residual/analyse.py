@@ -122,23 +122,28 @@ def analyse(model: str, t, signals: dict, extra: dict | None = None, fixed: dict
                     "timing error")
     sig = m.prepare(t, signals, filt, extra, timing)
     check = None
+    motor_side = len(m.positions) == 2 and "theta_m" in signals and m.cables and \
+        not getattr(m, "fixed_bands", False)
+
+    def rigid_fallback(why: dict):
+        """The motor side alone: a rigid axis with its friction (item 4 of [greybox])."""
+        motor = {"tau": signals[m.inputs[0]], "q": signals["theta_m"]}
+        mu = {k: (units or {}).get(s) for k, s in (("tau", m.inputs[0]), ("q", "theta_m"))}
+        out = analyse("rigid_axis", t, motor, extra, None, None, alpha, free_run,
+                      None, options, max_steps, declared, estimator=estimator,
+                      stick_slip=stick_slip, units={k: u for k, u in mu.items() if u},
+                      timing=timing_info["chosen"] if timing_info["rule"] == "given"
+                      else "auto")
+        out.settings["identifiability"] = {**why, "declared": m.name}
+        return out
     if m.cables and not getattr(m, "fixed_bands", False):   # a cable between two encoders
         noise = sum(ev.get("noise_level", 0.0) * choice["chosen_hz"][p]
                     for p, ev in choice.get("signals", {}).items())
         check = deflection_check(sig, trim or 50, noise, alpha)
-        if not check["identifiable"] and len(m.positions) == 2 and "theta_m" in signals:
-            # not a cable's deflection: the motor side alone, a rigid axis with its friction
-            motor = {"tau": signals[m.inputs[0]], "q": signals["theta_m"]}
-            mu = {k: (units or {}).get(s) for k, s in (("tau", m.inputs[0]), ("q", "theta_m"))}
-            sel = analyse("rigid_axis", t, motor, extra, None, None, alpha, free_run,
-                          None, options, max_steps, declared, estimator=estimator,
-                          stick_slip=stick_slip, units={k: u for k, u in mu.items() if u},
-                          timing=timing_info["chosen"] if timing_info["rule"] == "given"
-                          else "auto")
-            sel.settings["identifiability"] = {
-                **check, "declared": m.name, "fallback": "rigid_axis on the motor side "
-                "(tau_m, theta_m): the motor-minus-link angle is not a cable's deflection"}
-            return sel
+        if not check["identifiable"] and motor_side:
+            return rigid_fallback({**check, "fallback": "rigid_axis on the motor side "
+                                   "(tau_m, theta_m): the motor-minus-link angle is not a "
+                                   "cable's deflection"})
     val = None
     if validation is not None:
         val = m.prepare(validation[0], validation[1], sig["filter"], None, timing)
@@ -152,4 +157,18 @@ def analyse(model: str, t, signals: dict, extra: dict | None = None, fixed: dict
                                                     for p, why in ruled.items()]
     if check is not None:
         sel.settings["identifiability"] = check
+    zero = {k: 0.0 for k in m.collapses_at_zero
+            if k not in m.fixed and not sel.final.theta.get(k, 0.0) > 0.0}
+    if zero and motor_side:
+        # an inertia or the cable's stiffness at its bound 0: the flexible model cannot be
+        # simulated and its other estimates absorb the missing term; the record does not
+        # separate the link from the motor (a deflection near the encoders' resolution)
+        out = rigid_fallback({**(check or {}), "fallback": "rigid_axis on the motor side "
+                              "(tau_m, theta_m): the flexible fit is degenerate ("
+                              + ", ".join(f"{k} = 0" for k in zero) + " at its physical "
+                              "bound): the record does not separate the link from the motor",
+                              "degenerate": sorted(zero),
+                              "flexible_estimates": {k: float(v) for k, v in
+                                                     sel.final.theta.items()}})
+        return out
     return sel

@@ -200,6 +200,9 @@ class GreyBoxModel:
     # an estimate outside them is refitted with the bounds and both are reported (estimation.fit)
     bounds: dict[str, tuple[float, float]] = {}
     cables: dict = {}     # link equation -> (motor equation, deflection, its rate, stiffness)
+    # parameters whose estimate at 0 collapses the model (an inertia: no dynamics to simulate;
+    # a cable's stiffness: the link undriven): such a fit is degenerate, not a finding
+    collapses_at_zero: tuple[str, ...] = ()
     # parallel filtering (Gautier's IDIM-LS practice): the same zero-phase low-pass on both sides
     # of every equation (:meth:`equation_filter`), so the measured input and the columns built
     # from nonlinear functions of the state (a friction sign, a cubic spring) keep no content
@@ -419,6 +422,7 @@ class FlexibleJoint(GreyBoxModel):
     offset = {"tau_m": "offset_m", "tau_l": "offset_l"}
     defaults = {"tau_m": "tau_m1", "theta_m": "theta_m1", "q": "q1"}
     cables = {"tau_l": ("tau_m", "defl", "defl_d", "Ks")}
+    collapses_at_zero = ("Im", "I", "Ks")
     signal_units = {"tau_m": "N m", "theta_m": "rad", "q": "rad"}   # a rotary joint
 
     def augment(self, s: dict) -> dict:
