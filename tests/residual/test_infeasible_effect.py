@@ -56,3 +56,24 @@ def test_refinement_from_a_start_that_cannot_be_simulated_raises_a_value_error()
         raise ValueError("the windows diverge")
     with pytest.raises(ValueError, match="starting estimate's windows cannot be simulated"):
         refine(_Stub(), np.zeros((10, 1)), np.zeros((10, 1)), np.arange(3), shooting, {})
+
+
+@pytest.mark.parametrize("mode", ["noise-free", "as drawn"])
+def test_a_softening_remainder_is_not_claimed_as_a_hardening_spring(mode):
+    """random_joints seed 5 (plain numpy: link PD at 500 Hz, a chirp to 8 Hz, no effect at all;
+    as drawn its encoders have 65536 and 16384 counts): session 20 found hardening_stiffness
+    claimed with K3 -1028 (noise-free) and -825 (as drawn), a softening term whose torque is
+    0.06 % of the drive's. K3 >= 0 is the effect's physical bound: nothing is claimed, and the
+    parameters are those of the effect-free truth."""
+    import random_joints
+    from cdam_core.residual.analyse import analyse
+    p = random_joints.draw(5)
+    if mode == "noise-free":
+        p.update(motor_counts=0, link_counts=0, link_noise=0.0)
+    rec, _, Fc = random_joints.record(p)
+    assert rec is not None and Fc == 0.0
+    sel = analyse("flexible_joint", rec["t"], {k: rec[k] for k in ("tau_m", "theta_m", "q")},
+                  free_run=False, estimator="idim-ls")
+    assert [s.candidate.effect.key for s in sel.steps] == []
+    for k in ("Im", "I", "Ks", "Dl", "Dm", "Kd"):
+        assert sel.final.theta[k] == pytest.approx(p[k], rel=0.05), k
