@@ -1,5 +1,7 @@
 """Printing helper of the nano-drone effect measurements (nanodrone_lag.py,
 nanodrone_battery.py): one line per output group, RMSE without / with an effect."""
+import json
+
 import numpy as np
 
 
@@ -20,6 +22,5 @@ def fold_means(out, types, rates, k0: str, k1: str):
 def write_json(path, names, out) -> None:
     """Every fold's figures, with the group names, to ``path`` (nothing when None)."""
     if path:
-        import json
         with open(path, "w") as fh:
             json.dump({"groups": names, "folds": out}, fh, indent=1)

@@ -157,18 +157,17 @@ def analyse(model: str, t, signals: dict, extra: dict | None = None, fixed: dict
                                                     for p, why in ruled.items()]
     if check is not None:
         sel.settings["identifiability"] = check
-    zero = {k: 0.0 for k in m.collapses_at_zero
-            if k not in m.fixed and not sel.final.theta.get(k, 0.0) > 0.0}
+    zero = [k for k in m.collapses_at_zero
+            if k not in m.fixed and not sel.final.theta.get(k, 0.0) > 0.0]
     if zero and motor_side:
         # an inertia or the cable's stiffness at its bound 0: the flexible model cannot be
         # simulated and its other estimates absorb the missing term; the record does not
         # separate the link from the motor (a deflection near the encoders' resolution)
-        out = rigid_fallback({**(check or {}), "fallback": "rigid_axis on the motor side "
-                              "(tau_m, theta_m): the flexible fit is degenerate ("
-                              + ", ".join(f"{k} = 0" for k in zero) + " at its physical "
-                              "bound): the record does not separate the link from the motor",
-                              "degenerate": sorted(zero),
-                              "flexible_estimates": {k: float(v) for k, v in
-                                                     sel.final.theta.items()}})
-        return out
+        return rigid_fallback({**(check or {}), "fallback": "rigid_axis on the motor side "
+                               "(tau_m, theta_m): the flexible fit is degenerate ("
+                               + ", ".join(f"{k} = 0" for k in zero) + " at its physical "
+                               "bound): the record does not separate the link from the motor",
+                               "degenerate": sorted(zero),
+                               "flexible_estimates": {k: float(v) for k, v in
+                                                      sel.final.theta.items()}})
     return sel

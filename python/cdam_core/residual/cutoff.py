@@ -190,8 +190,9 @@ def creep_error(x, step: float) -> np.ndarray:
     return x - est
 
 
-def noise_cutoff(x, fs: float, lowest: float = 0.0) -> tuple[float, dict]:
-    """The cut-off of one position signal (module doc) and the evidence."""
+def noise_cutoff(x, fs: float) -> tuple[float, dict]:
+    """The cut-off of one position signal (module doc) and the evidence; the motion's own
+    frequency bounds it from below in :func:`choose_cutoff`."""
     x = np.asarray(x, dtype=float)
     n = x.size
     nper = int(min(n, max(256, 2 ** int(np.log2(max(n / 8, 2))))))
@@ -217,8 +218,8 @@ def noise_cutoff(x, fs: float, lowest: float = 0.0) -> tuple[float, dict]:
     q = stats.chi2.isf(LEVEL / tested, dof) / dof
     thr = level * q
     above = np.flatnonzero((P > floor * q) & (f > 0))
-    fc = float(f[above[-1]]) if above.size else lowest
-    fc = float(min(max(fc, lowest, f[1] if f.size > 1 else 0.0), top))
+    fc = float(f[above[-1]]) if above.size else 0.0
+    fc = float(min(max(fc, f[1] if f.size > 1 else 0.0), top))
     return fc, {"noise_level": level, "threshold": thr, "frequencies_tested": tested,
                 "resolution_hz": float(f[1] - f[0]),
                 "encoder_step": step,
