@@ -46,3 +46,23 @@ def test_numpy_reference_equals_the_core():
     th_np = b._lm_numpy(theta, args, 3)
     th_c, _ = _core.kstep_train_lm(theta, *args, epochs=3)
     np.testing.assert_allclose(th_np, th_c, rtol=0, atol=1e-7 * np.abs(th_c).max())
+
+
+def test_numpy_reference_with_a_linear_part_equals_the_core():
+    """kstep_anchored_epoch's reference: the ARX-anchored form (a linear part of 2 lags, per-step
+    error scales)."""
+    b = _bench()
+    theta, args = _args(seed=1, ns=4, K=8)
+    rng = np.random.default_rng(2)
+    lin = rng.normal(size=(4, 8)) * 0.1
+    args = args[:9] + (rng.uniform(0.5, 2.0, (8, 4)),)
+    starts = args[3][args[3] >= 1]
+    args = args[:3] + (starts,) + args[4:]
+    jtj, jte, sse = b._normal_numpy(theta, args, chunk=37, lin=lin)
+    cj, ce, cs = _core.kstep_normal(theta, *args, lin=lin)
+    np.testing.assert_allclose(np.tril(jtj), np.tril(cj), rtol=1e-10, atol=1e-10 * np.abs(cj).max())
+    np.testing.assert_allclose(jte, ce, rtol=1e-10, atol=1e-10 * np.abs(ce).max())
+    assert abs(sse - cs) < 1e-10 * cs
+    th_np = b._lm_numpy(theta, args, 3, lin=lin, chunk=37)
+    th_c, _ = _core.kstep_train_lm(theta, *args, epochs=3, lin=lin)
+    np.testing.assert_allclose(th_np, th_c, rtol=0, atol=1e-7 * np.abs(th_c).max())

@@ -22,6 +22,8 @@
 //   G_{j+1} = G_j + G_j A_j^T + sum_l G_{j-l} L_l^T + B_j (G_i = 0 for i <= 0),  A_j = d o / d s = diag(r) W2 diag(1 - a^2) W1[:, :ns]
 //   diag(1/c); B_j = d o / d theta at fixed s: dO_i/dW2[i,h] = r_i a_h, dO_i/db2[i] = r_i,
 //   dO_i/dW1[h,k] = r_i W2[i,h] (1 - a_h^2) x_k, dO_i/db1[h] = r_i W2[i,h] (1 - a_h^2).
+// Each step's G_j (I + A_j)^T and G_{j-l} L_l^T are tall-by-small products in register tiles
+// (host::sensitivity_product, kstep_kernels.hpp; only G_{j+1}, G_j and the lags' G are kept).
 // The rows of J = G / q of one window (K ns columns of D values) go through the rank update
 // J'J += V V' (host::syrk_lower on the AVX2 path, Eigen's rankUpdate otherwise); J'e alongside.
 //
@@ -47,6 +49,7 @@
 #include "../levenberg_marquardt.hpp"
 #include "../status.hpp"
 #include "kernels.hpp"
+#include "kstep_kernels.hpp"
 
 namespace cdam::host {
 
@@ -126,6 +129,12 @@ class KStep {
     double sse = 0;
   };
 
+  // Slots of the sensitivities kept: G_{j+1}, G_j and the linear part's lags G_{j-1} ..
+  Index ring() const { return std::max<Index>(sh_.lin_lags(), 1) + 1; }
+  double* slot(Scratch& s, Index j) const {
+    return s.G.data() + (j % ring()) * D_ * sh_.ns;
+  }
+
   void alloc(Scratch& s) const {
     const Index ns = sh_.ns, H = sh_.H;
     s.x.resize(static_cast<size_t>(sh_.ni()));
@@ -133,7 +142,7 @@ class KStep {
     s.g.resize(static_cast<size_t>(H));
     s.c.resize(static_cast<size_t>(ns * H));
     s.A.resize(static_cast<size_t>(ns * ns));
-    s.G.resize(static_cast<size_t>(D_ * ns * (sh_.K + 1)));   // G_0 .. G_K
+    s.G.resize(static_cast<size_t>(D_ * ns * ring()));       // G_j in slot j % ring()
     s.V.resize(static_cast<size_t>(D_ * ns * sh_.K));
     s.e.resize(static_cast<size_t>(ns * sh_.K));
     s.st.resize(static_cast<size_t>(ns * (sh_.K + 1)));       // s_hat_0 .. s_hat_K
@@ -152,7 +161,6 @@ class KStep {
     const Index nl = sh_.lin_lags(), nlin = nl * ns;
     double* sh = s.st.data();   // sh + j ns: s_hat_j (s_hat_0 the measured start)
     for (Index i = 0; i < ns; ++i) sh[i] = d.S[a * ns + i];
-    if (sens) std::fill(s.G.begin(), s.G.begin() + D * ns, 0.0);
     for (Index j = 0; j < sh_.K; ++j) {
       const Index t = static_cast<Index>(a) + j;
       const double* st = sh + j * ns;
@@ -181,27 +189,19 @@ class KStep {
             for (Index h = 0; h < H; ++h) acc += c[i * H + h] * W1[k * H + h];
             A[i * ns + k] = acc / sh_.in_scale[k] + (nl ? sh_.lin[i * nlin + k] : 0.0);
           }
-        // G_{j+1}[:, i] = G_j[:, i] + sum_k A[i,k] G_j[:, k] + sum_{l>=1} L_l[i,k] G_{j-l}[:, k]
-        //                 + B[:, i]
-        const double* G = s.G.data() + j * D * ns;
-        double* Gn = s.G.data() + (j + 1) * D * ns;
+        // G_{j+1} = G_j (I + A)^T + sum_{l>=1} G_{j-l} L_l^T (G_i = 0 for i <= 0), then B
+        double* Gn = slot(s, j + 1);
+        if (j == 0) {
+          std::fill(Gn, Gn + D * ns, 0.0);
+        } else {
+          for (Index i = 0; i < ns; ++i) A[i * ns + i] += 1.0;
+          sensitivity_product(Gn, D, slot(s, j), D, A, ns, D, ns, ns, false);
+          for (Index l = 1; l < nl && j - l >= 1; ++l)
+            sensitivity_product(Gn, D, slot(s, j - l), D, sh_.lin + l * ns, nlin, D, ns, ns,
+                                true);
+        }
         for (Index i = 0; i < ns; ++i) {
           double* out = Gn + i * D;
-          const double* gi = G + i * D;
-          for (Index p = 0; p < D; ++p) out[p] = gi[p];
-          for (Index k = 0; k < ns; ++k) {
-            const double aik = A[i * ns + k];
-            const double* gk = G + k * D;
-            for (Index p = 0; p < D; ++p) out[p] += aik * gk[p];
-          }
-          for (Index l = 1; l < nl && j - l >= 1; ++l) {
-            const double* Gl = s.G.data() + (j - l) * D * ns;
-            for (Index k = 0; k < ns; ++k) {
-              const double lik = sh_.lin[i * nlin + l * ns + k];
-              const double* gk = Gl + k * D;
-              for (Index p = 0; p < D; ++p) out[p] += lik * gk[p];
-            }
-          }
           const double* ci = c + i * H;
           for (Index k = 0; k < ni; ++k) {
             const double xk = x[k];
@@ -231,7 +231,7 @@ class KStep {
         const double q = sh_.err_scale_k ? sh_.err_scale_k[j * ns + i] : sh_.err_scale[i] / wj;
         e[j * ns + i] = (d.S[(t + 1) * ns + i] - nx[i]) / q;
         if (sens) {
-          const double* gi = s.G.data() + (j + 1) * D * ns + i * D;
+          const double* gi = slot(s, j + 1) + i * D;
           double* v = s.V.data() + (j * ns + i) * D;
           for (Index p = 0; p < D; ++p) v[p] = gi[p] / q;
         }
