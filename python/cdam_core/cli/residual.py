@@ -230,6 +230,12 @@ def _firmware_refit(sel, g, ds, inputs, outputs):
                "one_step_rms_causal": rms(h)}
 
 
+def _rel(s, v) -> str:
+    """A relative sigma for the summary ("-" where there is none)."""
+    return (f"{100 * abs(s / v):.2g} %" if s is not None and v not in (0, None) and
+            math.isfinite(s) else "-")
+
+
 def _summary(js: dict) -> list[str]:
     """What a person reads on stdout (the whole result goes to --json FILE): the choices made,
     the final parameters with their sigma, the findings, the unexplained lines, the test."""
@@ -265,10 +271,14 @@ def _summary(js: dict) -> list[str]:
         if k in ruled:
             out.append(f"  {k} 0 (ruled out by the units)")
             continue
-        s = std.get(k)
-        rel = (f"{100 * abs(s / v):.2g} %" if s is not None and v not in (0, None) and
-               math.isfinite(s) else "-")
-        out.append(f"  {k} {v:.5g} ({rel})")
+        out.append(f"  {k} {v:.5g} ({_rel(std.get(k), v)})")
+    unc = ((st.get("estimator") or {}).get("refinement") or {}).get("unconstrained")
+    if unc:
+        out.append(f"  at a bound: {', '.join(unc['lifted'])}; the same estimate without "
+                   f"{'that bound' if len(unc['lifted']) == 1 else 'those bounds'}: " + (
+                       ", ".join(f"{k} {v:.5g} ({_rel(unc['std'].get(k), v)})"
+                                 for k, v in unc["theta"].items())
+                       if "theta" in unc else f"unavailable ({unc.get('reason')})"))
     for k, v in (js.get("derived_parameters") or {}).items():
         out.append(f"  derived: {k} {v:.5g}")
     for d in st.get("declared_terms_dropped") or ():

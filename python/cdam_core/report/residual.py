@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -158,6 +159,12 @@ def _figure_spectrum(path: Path, sel: Selection, units: dict) -> None:
     plt.close(fig)
 
 
+def _bounded_rms(sel) -> float:
+    """The final output-error estimate's window RMS (NaN when not reported)."""
+    ref = (sel.settings.get("estimator") or {}).get("refinement") or {}
+    return float(ref.get("window_rms_after", float("nan")))
+
+
 def _param_rows(sel, fit, units: dict) -> list[str]:
     """Table rows: parameter, value, standard deviation, relative sigma, unit."""
     rows = []
@@ -257,6 +264,17 @@ def write_report(sel: Selection, out_dir, title: str | None = None, source: str 
     lines += ["", "Standard deviations are the chosen estimator's (IDIM-LS and IDIM-IV: from "
               "the equations; output error: from the windows' Jacobian), errors taken as white: "
               "optimistic when they are not."]
+    unc = ((sel.settings.get("estimator") or {}).get("refinement") or {}).get("unconstrained")
+    if unc:
+        lines += ["", f"At a bound: {', '.join(unc['lifted'])} (no standard deviation there; "
+                  "the others' are conditional on it). The same output-error estimate without "
+                  "that bound, reported beside it (window RMS "
+                  + (f"{unc['window_rms_after']:.4g} against {_bounded_rms(sel):.4g} "
+                     "bounded):" if "theta" in unc else
+                     f"-): unavailable, {unc.get('reason')}.")]
+        if "theta" in unc:
+            fit = SimpleNamespace(theta=unc["theta"], std=unc["std"], estimated=unc["theta"])
+            lines += [""] + _PARAM_HEAD + _param_rows(sel, fit, units)
     dropped = sel.settings.get("declared_terms_dropped") or []
     if dropped:
         lines += ["", "Declared terms the held-out data do not support (fixed at 0): "
