@@ -241,7 +241,14 @@ def _summary(js: dict) -> list[str]:
     the final parameters with their sigma, the findings, the unexplained lines, the test."""
     st = js.get("settings", {})
     out = [f"model {js['model']}"]
-    if (tm := st.get("timing")) and "chosen" in tm:
+    wc = (st.get("timing") or {}).get("windows_check") or {}
+    if wc.get("equations_chose") and wc.get("chosen") != wc["equations_chose"]:
+        eq = wc["equations_chose"]
+        p_eq = st["timing"].get("p_value" if eq == "held" else "p_value_sampled")
+        out.append(f"input timing: {wc['chosen']} (output error's windows, p "
+                   f"{wc['p_value_' + wc['chosen']]:.2g}; the equations chose {eq}"
+                   + (f", p {p_eq:.2g})" if p_eq is not None else ")"))
+    elif (tm := st.get("timing")) and "chosen" in tm:
         p = tm.get("p_value" if tm["chosen"] == "held" else "p_value_sampled",
                    tm.get("p_value"))
         out.append(f"input timing: {tm['chosen']}" + (

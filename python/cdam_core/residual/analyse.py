@@ -6,9 +6,10 @@ from cdam_core.residual.cutoff import at_rest, choose_cutoff, given_cutoff
 from cdam_core.residual.identifiability import deflection_check
 from cdam_core.models.greybox.registry import get_model
 from cdam_core.models.greybox.effects import LIBRARY, candidates as library_candidates
-from cdam_core.residual.selection import (ESTIMATOR_CHOICES, STICK_SLIP_CHOICES, Selection,
+from cdam_core.residual.selection import (ESTIMATOR_CHOICES, ESTIMATORS, STICK_SLIP_CHOICES,
+                                          Selection,
                                           select)
-from cdam_core.residual.timing import choose_timing
+from cdam_core.residual.timing import choose_timing, windows_timing
 
 __all__ = ["analyse"]
 
@@ -150,6 +151,23 @@ def analyse(model: str, t, signals: dict, extra: dict | None = None, fixed: dict
     sel = select(m, sig, cands, alpha=alpha, free_run=free_run, validation=val,
                  max_steps=max_steps, declared_effects=dec, trim=trim, keep_terms=keep_terms,
                  estimator=estimator, stick_slip=stick_slip)
+    if timing_info["rule"] != "given" and not getattr(m, "fixed_bands", False) and \
+            sel.settings["estimator"].get("chosen") == ESTIMATORS["oe"]:
+        # the timing the equations chose, checked on the chosen estimator's windows
+        check_t = windows_timing(sel.final.model, lambda tm: m.prepare(t, signals, filt, extra,
+                                                                         tm),
+                                 sel.final.effects, timing, sel.settings["trim"], alpha)
+        timing_info = {**timing_info, "windows_check": check_t}
+        if check_t["chosen"] != timing:
+            timing = timing_info["chosen"] = check_t["chosen"]
+            timing_info["rule"] = ("the equations' choice, overruled by output error's "
+                                   "windows (windows_check)")
+            sig = m.prepare(t, signals, filt, extra, timing)
+            if validation is not None:
+                val = m.prepare(validation[0], validation[1], sig["filter"], None, timing)
+            sel = select(m, sig, cands, alpha=alpha, free_run=free_run, validation=val,
+                         max_steps=max_steps, declared_effects=dec, trim=trim,
+                         keep_terms=keep_terms, estimator=estimator, stick_slip=stick_slip)
     sel.settings["filter_choice"] = choice
     sel.settings["timing"] = timing_info
     if ruled:
