@@ -7,8 +7,7 @@ from cdam_core.residual.identifiability import deflection_check
 from cdam_core.models.greybox.registry import get_model
 from cdam_core.models.greybox.effects import LIBRARY, candidates as library_candidates
 from cdam_core.residual.selection import (ESTIMATOR_CHOICES, ESTIMATORS, STICK_SLIP_CHOICES,
-                                          Selection,
-                                          select)
+                                          Selection, select)
 from cdam_core.residual.timing import choose_timing, windows_timing
 
 __all__ = ["analyse"]

@@ -57,6 +57,14 @@ def held_out_equation_error(model, sig, effects, trim: int, folds: int = FOLDS) 
     return np.concatenate(out)
 
 
+def _both_ways(diff) -> tuple[float, float]:
+    """One-sided Wilcoxon p-values of paired differences a - b: (a lower, b lower); 1, 1 when
+    every difference is zero."""
+    if not np.any(diff):
+        return 1.0, 1.0
+    return tuple(float(stats.wilcoxon(diff, alternative=a).pvalue) for a in ("less", "greater"))
+
+
 def choose_timing(model, prepare, effects=(), trim: int = 50, alpha: float = 0.01,
                   folds: int = FOLDS) -> tuple[str, dict]:
     """The input timing the record supports (module doc) and the evidence.
@@ -92,9 +100,7 @@ def choose_timing(model, prepare, effects=(), trim: int = 50, alpha: float = 0.0
         info.update(chosen=DEFAULT, status="unavailable", decided=False,
                     reason=f"{count} held-out windows of {H} samples (need {MIN_WINDOWS})")
         return DEFAULT, info
-    diff = w["held"] - w["sampled"]
-    p_held, p_sampled = (1.0, 1.0) if not np.any(diff) else (
-        float(stats.wilcoxon(diff, alternative=a).pvalue) for a in ("less", "greater"))
+    p_held, p_sampled = _both_ways(w["held"] - w["sampled"])
     chosen = "held" if p_held < alpha / 2 else "sampled" if p_sampled < alpha / 2 else DEFAULT
     info.update(chosen=chosen, status="ok", p_value=p_held, p_value_sampled=p_sampled,
                 decided=bool(min(p_held, p_sampled) < alpha / 2))
@@ -148,9 +154,7 @@ def windows_timing(model, prepare, effects, chosen: str, trim: int,
     if why or ok.sum() < MIN_WINDOWS:
         return {**info, "chosen": chosen, "decided": False, "status": "unavailable",
                 "reason": "; ".join(why) or f"{int(ok.sum())} windows (need {MIN_WINDOWS})"}
-    diff = err[other][ok] - err[chosen][ok]
-    p_other, p_chosen = (1.0, 1.0) if not np.any(diff) else (
-        float(stats.wilcoxon(diff, alternative=a).pvalue) for a in ("less", "greater"))
+    p_other, p_chosen = _both_ways(err[other][ok] - err[chosen][ok])
     better = p_other < alpha / 2
     return {**info, "status": "ok", "windows": int(ok.sum()),
             "window_error": {chosen: float(np.mean(err[chosen][ok])),

@@ -380,7 +380,7 @@ class BlockedCV:
         """[greybox] item 4, "refit with bounds and report both": the final estimate with the
         bounds of the parameters it ended on (``lifted``) removed, from the IDIM-LS ``start``:
         where the windows do not determine a parameter, its estimate and sigma say so (random
-        joint seed 2, link PD: Dl at its bound 0; unconstrained -0.058, sigma 0.073, for the
+        joint seed 2, link PD: Dl at its bound 0; unconstrained -0.091, sigma 0.073, for the
         truth 0.089). ``g`` keeps the bounded estimate."""
         bounded = {p: g.theta_[p] for p in g.estimated_}
         free = {k: v for k, v in bounds.items() if k not in lifted}
