@@ -1,5 +1,6 @@
 """Structures compared under output error decide on output error's fold fits alone
-(selection.compare_structures, SINGLE_ROUTE); IDIM-IV keeps the second route by IDIM-LS.
+(selection.compare_by, each rollout's comparison in compare_structures; SINGLE_ROUTE); IDIM-IV
+keeps the second route by IDIM-LS.
 
 Random joint seed 2 (tests/residual/random_joints.py, plain numpy: link PD, 500 Hz, a linear
 cable deflecting up to 55 rad, no effect): with both routes a cubic spring was claimed on
@@ -12,7 +13,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from cdam_core.residual.selection import compare_structures
+from cdam_core.residual.selection import compare_by
 
 sys.path.insert(0, os.path.dirname(__file__))
 import random_joints  # noqa: E402
@@ -38,7 +39,7 @@ S, R = ((), None), (("x",), None)
 
 def test_output_error_decides_alone_at_the_full_level():
     cv = _Recording(better={"idim"})
-    got = compare_structures(cv, S, R, "oe", tested=3, alpha=0.01)
+    got = compare_by(cv, S, R, "oe", tested=3, alpha=0.01)
     assert cv.calls == [("oe", 3)]           # one route, Bonferroni over the 3 tested only
     assert not got.better                   # IDIM-LS's route is not asked
     assert got.route == "output error (multiple shooting)"
@@ -46,14 +47,14 @@ def test_output_error_decides_alone_at_the_full_level():
 
 def test_instrumental_variables_keep_the_second_route():
     cv = _Recording(better={"idim"})
-    got = compare_structures(cv, S, R, "iv", tested=3, alpha=0.01)
+    got = compare_by(cv, S, R, "iv", tested=3, alpha=0.01)
     assert cv.calls == [("iv", 6), ("idim", 6)]
     assert got.better and got.route == "IDIM-LS"
 
 
 def test_a_failed_output_error_route_is_the_fallback_compare_made():
     cv = _Recording(better={"oe"}, fail={"oe"})
-    got = compare_structures(cv, S, R, "oe", tested=2, alpha=0.01)
+    got = compare_by(cv, S, R, "oe", tested=2, alpha=0.01)
     assert cv.calls == [("oe", 2)] and got.fallback == "failed" and got.route == ""
 
 

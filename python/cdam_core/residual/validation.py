@@ -41,7 +41,7 @@ from cdam_core.models.greybox.augmented import INTEGRATORS
 from cdam_core.models.greybox.estimation import design, fit
 from cdam_core.residual.benchmark import greybox_of
 from cdam_core.residual.instrumental import iv_fit
-from cdam_core.residual.output_error import (joint_refine, refine, runs,
+from cdam_core.residual.output_error import (BOUND_TOL, joint_refine, refine, runs,
                                              simulation_refine)
 
 __all__ = ["BlockedCV", "Comparison", "midpoint", "motion_horizon", "paired"]
@@ -126,6 +126,8 @@ class Comparison:
     fallback: str = ""      # the estimator asked for failed: both compared by IDIM-LS, why
     route: str = ""         # the fold fits this comparison used, when there were two routes
     other_route: dict | None = None    # the other route's comparison (to_json)
+    rollout: str = ""       # the windows' dry friction, when compared both ways: held / stick-slip
+    other_rollout: dict | None = None  # the other rollout's comparison (to_json)
 
     @property
     def better(self) -> bool:
@@ -138,7 +140,9 @@ class Comparison:
                 "better": self.better, **({"reason": self.reason} if self.reason else {}),
                 **({"compared_by_idim_ls_because": self.fallback} if self.fallback else {}),
                 **({"route": self.route, "other_route": self.other_route}
-                   if self.route else {})}
+                   if self.route else {}),
+                **({"rollout": self.rollout, "other_rollout": self.other_rollout}
+                   if self.rollout else {})}
 
 
 def paired(e0, e1, tested: int, alpha: float, reason0: str = "",
@@ -201,6 +205,7 @@ class BlockedCV:
         self.norm = np.where(var > 0, var, 1.0)
         self._cache: dict = {}
         self._folds: dict = {}
+        self._held, self._stick_slip = None, None   # stick_slip_view's pair
         # the criterion: simulation windows if the declared model simulates them better than
         # holding the last measurement, else held-out equation error
         self.criterion = "simulation"
@@ -229,7 +234,35 @@ class BlockedCV:
         out = copy.copy(self)
         out.integrator = integrator
         out._cache, out._folds = {}, {}
+        out._held, out._stick_slip = None, None
         return out
+
+    def stick_slip_view(self) -> "BlockedCV | None":
+        """These windows with each dry friction's stick-slip ("rk4-stickslip"), kept with its
+        caches (the structures' comparisons and the final rollout choice share its fold fits);
+        a structure that nothing can stop is scored by these windows' own rollout (the same
+        numbers). None unless these windows are RK4 with the sign held."""
+        if self.integrator != "rk4" or self.criterion != "simulation":
+            return None
+        if self._stick_slip is None:
+            self._stick_slip = self.with_integrator("rk4-stickslip")
+            self._stick_slip._held = self
+        return self._stick_slip
+
+    def sticks(self, effects=(), model=None) -> bool:
+        """Can a dry friction of the structure stop one of its positions (a switching term
+        that jumps at a velocity's zero: :mod:`cdam_core.models.greybox.stickslip`)? Read
+        from the first fold's IDIM fit (kept for its scores); False where it cannot be made."""
+        model = self.model if model is None else model
+        effects = tuple(effects)
+        if not effects:
+            return False
+        try:
+            _, g = self._fold_model(model, effects, "idim", 0, self.inputs(effects))
+            return bool(g is not None and np.any(g._sticky(*g._inputs(self.inputs(effects)),
+                                                           {})))
+        except (ValueError, FloatingPointError, np.linalg.LinAlgError):
+            return False
 
     def inputs(self, effects) -> np.ndarray:
         """The record's input columns for a structure (the model's inputs, then the measured
@@ -275,6 +308,8 @@ class BlockedCV:
         of the windows (:meth:`_block_run`), the same fold models."""
         model = self.model if model is None else model
         effects = tuple(effects)
+        if self._held is not None and not self._held.sticks(effects, model):
+            return self._held.scores(effects, model, estimator, fit_state, blocks)
         key = self._key(model, effects) + (estimator, fit_state, blocks)
         if key in self._cache:
             return self._cache[key]
@@ -357,20 +392,22 @@ class BlockedCV:
         start = {p: g.theta_[p] for p in g.estimated_}
         _, info = refine(g, U, self.Y, starts, self._shooting, bounds)
         if joint:
-            info = self._joint(g, U, starts, bounds, info)
+            info = self._joint(g, U, starts, bounds, info, start)
             if info.get("at_bound"):
                 info["unconstrained"] = self._unconstrained(g, U, starts, bounds, start,
                                                             info["at_bound"])
         return info
 
-    def _joint(self, g, U, starts, bounds, info) -> dict:
-        """The joint refinement from the nested one's optimum (``info``); on failure ``g``
-        keeps that optimum and the report says why."""
+    def _joint(self, g, U, starts, bounds, info, start) -> dict:
+        """The joint refinement from the nested one's optimum (``info``, started from
+        ``start``: its bound tolerance is in those units, output_error.BOUND_TOL); on failure
+        ``g`` keeps that optimum and the report says why."""
         nested = {k: info[k] for k in ("window_rms_after", "evaluations")}
         before = {p: g.theta_[p] for p in g.estimated_}
+        near = {p: BOUND_TOL * (abs(start[p]) or 1.0) for p in info.get("at_bound", ())}
         try:
             out = joint_refine(g, U, self.Y, starts, bounds, self.norm, self.horizon, self.dt,
-                               self.integrator, at_bound=info.get("at_bound", ()))
+                               self.integrator, at_bound=near)
         except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
             g.set_parameters(before)
             return {**info, "joint": {"status": "unavailable", "reason": str(exc)}}
@@ -387,7 +424,7 @@ class BlockedCV:
         g.set_parameters(start)
         try:
             _, nested = refine(g, U, self.Y, starts, self._shooting, free)
-            out = self._joint(g, U, starts, free, nested)
+            out = self._joint(g, U, starts, free, nested, start)
             report = {"lifted": list(lifted), "theta": {p: float(g.theta_[p])
                                                         for p in g.estimated_},
                       "std": out["std"], "window_rms_after": out["window_rms_after"],
