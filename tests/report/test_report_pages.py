@@ -51,6 +51,12 @@ def test_residual_report_page_with_units_and_sigmas(tmp_path, bundled_record):
     # the residual's periodic lines (50 Hz mains on DATA_EMPS): amplitudes in the force's unit
     lines = [ln for ln in md.splitlines() if ln.startswith("| tau | periodic_line |")]
     assert lines and all(re.search(r"\| amplitude [-0-9.e]+ N \(x", ln) for ln in lines), lines
+    # each finding's held-out decision, as the JSON has it
+    held = [ln for ln in md.splitlines() if ln.startswith("Held out: ")]
+    assert len(held) == len(js["findings"]) and js["findings"]
+    for ln, f in zip(held, js["findings"]):
+        v = f["evidence"]["validation"]
+        assert f"p {v['p_value']:.2g} at level {v['level']:.2g}" in ln, (ln, v)
 
 
 def _small_record(d: Path):

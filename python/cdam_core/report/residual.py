@@ -14,7 +14,19 @@ from cdam_core.report.page import figure, write_page
 from cdam_core.report.units import channel_unit, derived_unit, parameter_unit
 
 from cdam_core.residual import diagnostics as dg
-from cdam_core.residual.selection import Selection
+from cdam_core.residual.selection import ESTIMATORS, SINGLE_ROUTE, Selection
+
+
+def held_out_line(v: dict) -> str:
+    """A finding's held-out decision (``Comparison.to_json``) as one sentence."""
+    how = ", ".join(x for x in (f"{v['route']} fold fits" if v.get("route") else "",
+                                f"{v['rollout']} windows" if v.get("rollout") else "") if x)
+    other = v.get("other_rollout") or v.get("other_route")
+    return (f"Held out: mean window error {v['score_rich']:.3g} with it against "
+            f"{v['score_simple']:.3g} without, one-sided Wilcoxon p {v['p_value']:.2g} at level "
+            f"{v['level']:.2g}" + (f" ({how})" if how else "")
+            + (f"; the other {'rollout' if v.get('other_rollout') else 'route'}: p "
+               f"{other['p_value']:.2g}" if other else "") + ".")
 
 
 def to_json(sel: Selection) -> dict:
@@ -251,7 +263,8 @@ def write_report(sel: Selection, out_dir, title: str | None = None, source: str 
                   f"({ev['added_parameters']}, N_eff = {ev['n_eff']:.0f}) -> p = {ev['p_value']:.3g}, "
                   f"delta BIC {ev['delta_bic']:.4g}; Ljung-Box p before "
                   f"{ev['ljung_box_before']['pvalue']:.3g}, after {ev['ljung_box_after']['pvalue']:.3g}.",
-                  ""] + figure(png, f"finding {i + 1}",
+                  ""] + ([held_out_line(ev["validation"]), ""] if ev.get("validation") else []) \
+            + figure(png, f"finding {i + 1}",
                                f"Figure {i + 1}: residual of the {st.candidate.effect.display_equation(st.before.residuals)} "
                                f"equation before and after adding `{fjs['effect']}` against "
                                "time (top left), its autocorrelation with the 99 % band of a "
@@ -297,12 +310,15 @@ def write_report(sel: Selection, out_dir, title: str | None = None, source: str 
             for k, v in derived.items()) + "."]
     cmp = sel.settings.get("structures_compared_by") or {}
     if cmp.get("validation"):
-        both = "" if cmp["chosen"] == "IDIM-LS" else (
+        single = {"IDIM-LS"} | {ESTIMATORS[c] for c in SINGLE_ROUTE}
+        both = "" if cmp["chosen"] in single else (
             " and by their IDIM-LS fold fits (two routes, each at half the level: a structure "
             "is better if either says so)")
         lines += ["", f"Structures (effects added, the backward pass) compared on held-out "
                       f"windows by their {cmp['chosen']} fold fits, the estimator the windows "
-                      f"choose for the declared model{both}."]
+                      f"choose for the declared model{both}; those holding a dry friction on "
+                      "two rollouts of the windows, its sign held over each step and its "
+                      "stick-slip, each at half the level."]
     est = sel.settings.get("estimator") or {}
     if est.get("validation"):
         alts = "; ".join(f"{name}: mean error {v['score_rich']:.3g} against IDIM-LS's "
