@@ -579,7 +579,7 @@ def choose_stick_slip(model, sig, idim: Fit, current: Fit, code: str, cv, alpha:
                              "rule": "no dry friction in the model: nothing sticks"}
     if stick_slip == "off":
         return current, cv, {**out, "chosen": "held", "rule": "given (off)"}
-    cs = cv.stick_slip_view() or cv.with_integrator("rk4-stickslip")
+    cs = cv.stick_slip_view()    # the caller's windows are RK4 held (select)
     if stick_slip == "auto":
         e0, r0 = cv.scores(current.effects, model, code)
         e1, r1 = cs.scores(current.effects, model, code)

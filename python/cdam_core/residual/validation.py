@@ -257,10 +257,10 @@ class BlockedCV:
         effects = tuple(effects)
         if not effects:
             return False
+        U = self.inputs(effects)
         try:
-            _, g = self._fold_model(model, effects, "idim", 0, self.inputs(effects))
-            return bool(g is not None and np.any(g._sticky(*g._inputs(self.inputs(effects)),
-                                                           {})))
+            _, g = self._fold_model(model, effects, "idim", 0, U)
+            return bool(g is not None and np.any(g._sticky(*g._inputs(U), {})))
         except (ValueError, FloatingPointError, np.linalg.LinAlgError):
             return False
 
